@@ -1,0 +1,104 @@
+"""Pinhole geometry in the OpenCV convention.
+
+Frames:
+    pixel  (u, v): u to the right, v down; (0, 0) is the centre of the top-left pixel.
+    camera (x, y, z): x right, y down, z forward along the optical axis; metres.
+    world  (x, y, z): z up; origin at the centre of the bin floor's top surface; metres.
+
+Poses are 4 × 4 homogeneous matrices ``T_a_b`` mapping points in frame b to frame a.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Intrinsics:
+    """Pinhole intrinsics of a ``width`` × ``height`` image, in pixels."""
+
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+
+    @classmethod
+    def from_config(cls, cam) -> "Intrinsics":
+        return cls(int(cam.width), int(cam.height), float(cam.fx), float(cam.fy),
+                   float(cam.cx), float(cam.cy))
+
+    @property
+    def K(self) -> np.ndarray:
+        """3 × 3 camera matrix, float64."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    def as_dict(self) -> dict[str, float]:
+        return {"width": self.width, "height": self.height, "fx": self.fx, "fy": self.fy,
+                "cx": self.cx, "cy": self.cy}
+
+
+def backproject(depth_m: np.ndarray, intr: Intrinsics) -> np.ndarray:
+    """Depth image to a camera-frame point per pixel.
+
+    Args:
+        depth_m: (H, W) z-depth along the optical axis in metres (0 = no data).
+        intr: camera intrinsics.
+
+    Returns:
+        (H, W, 3) float32 points in the camera frame, metres; pixels without data give (0, 0, 0).
+    """
+    if depth_m.shape != (intr.height, intr.width):
+        raise ValueError(
+            f"depth image has shape {depth_m.shape}, expected (H, W) = "
+            f"({intr.height}, {intr.width}) from the camera intrinsics"
+        )
+    z = depth_m.astype(np.float32)
+    u = np.arange(intr.width, dtype=np.float32)[None, :]
+    v = np.arange(intr.height, dtype=np.float32)[:, None]
+    x = (u - intr.cx) / intr.fx * z
+    y = (v - intr.cy) / intr.fy * z
+    return np.stack([x, y, z], axis=-1)
+
+
+def project(points_cam: np.ndarray, intr: Intrinsics) -> np.ndarray:
+    """Camera-frame points (..., 3) in metres to pixel coordinates (..., 2) as (u, v)."""
+    p = np.asarray(points_cam, dtype=np.float64)
+    u = intr.fx * p[..., 0] / p[..., 2] + intr.cx
+    v = intr.fy * p[..., 1] / p[..., 2] + intr.cy
+    return np.stack([u, v], axis=-1)
+
+
+def camera_pose_above_bin(height: float) -> np.ndarray:
+    """``T_world_cam`` of a camera ``height`` metres above the world origin, looking down.
+
+    Camera x is world +x, camera y is world −y (image down = towards −y), camera z is world −z.
+    """
+    T = np.eye(4)
+    T[:3, :3] = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])
+    T[:3, 3] = [0.0, 0.0, height]
+    return T
+
+
+def world_to_camera(points_world: np.ndarray, T_world_cam: np.ndarray) -> np.ndarray:
+    """World-frame points (..., 3) to the camera frame (..., 3)."""
+    T_cam_world = np.linalg.inv(T_world_cam)
+    p = np.asarray(points_world, dtype=np.float64)
+    return p @ T_cam_world[:3, :3].T + T_cam_world[:3, 3]
+
+
+def pose_matrix(position: np.ndarray, quat_xyzw: np.ndarray) -> np.ndarray:
+    """4 × 4 pose from a position (3,) and a unit quaternion (x, y, z, w)."""
+    x, y, z, w = np.asarray(quat_xyzw, dtype=np.float64)
+    R = np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:3, 3] = position
+    return T

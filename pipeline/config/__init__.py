@@ -1,0 +1,16 @@
+"""Structured (dataclass) configuration schema, registered with Hydra's ConfigStore."""
+
+from pipeline.config.schema import (  # noqa: F401
+    BinConfig,
+    BoxesConfig,
+    BoxType,
+    CameraConfig,
+    GenerateConfig,
+    LoggingConfig,
+    PathsConfig,
+    PhysicsConfig,
+    PipelineConfig,
+    ReportConfig,
+    SensorConfig,
+    register_configs,
+)

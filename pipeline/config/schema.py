@@ -1,0 +1,176 @@
+"""Typed configuration schema for every stage.
+
+Every stage composes the same :class:`PipelineConfig`; each stage hashes only the sections it
+reads (see ``pipeline.artifacts.version``) so that, for example, changing ``report.*`` does not
+change the generation artifact's version.
+
+Values live in ``conf/``: one YAML file per physical set-up (camera, bin, box set, physics,
+sensor) and one per experiment scale (``experiment/smoke|default|paper``). The dataclass
+defaults here exist only so that the schema is complete; the YAML files are the source of truth.
+
+Units: metres, kilograms, seconds, pixels. Frames: world (z up, origin at the centre of the bin
+floor's top surface), camera (OpenCV: x right, y down, z forward along the optical axis).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import List, Optional
+
+from hydra.core.config_store import ConfigStore
+from omegaconf import MISSING
+
+
+@dataclass
+class PathsConfig:
+    """Where artifacts go. ``root`` holds ``data/``, ``models/`` and ``reports/``."""
+
+    root: str = MISSING  # set in conf/paths/default.yaml to the repository root
+    data: str = "${paths.root}/data"
+    models: str = "${paths.root}/models"
+    reports: str = "${paths.root}/reports"
+
+
+@dataclass
+class CameraConfig:
+    """Pinhole depth camera (SR300-like), OpenCV convention.
+
+    ``fx, fy, cx, cy`` are in pixels for a ``width`` × ``height`` image; pixel (u, v) = (0, 0)
+    is the centre of the top-left pixel. ``height_above_bin_floor`` is the distance from the
+    optical centre to the bin floor's top surface, along the (vertical) optical axis.
+    """
+
+    name: str = "sr300"
+    width: int = 416
+    height: int = 416
+    fx: float = 411.7
+    fy: float = 411.7
+    cx: float = 207.5
+    cy: float = 207.5
+    height_above_bin_floor: float = 0.625
+    near: float = 0.1
+    far: float = 2.0
+    renderer: str = "tiny"  # "tiny" (pybullet TinyRenderer) or "egl" (EGL plugin, Mesa on the CPU)
+
+
+@dataclass
+class BinConfig:
+    """An open box (tote) standing on the ground, centred on the world origin."""
+
+    inner_length_x: float = 0.40
+    inner_width_y: float = 0.30
+    wall_height: float = 0.15
+    wall_thickness: float = 0.010
+    floor_thickness: float = 0.020
+    lateral_friction: float = 0.5
+
+
+@dataclass
+class BoxType:
+    """A cuboid of edge lengths ``size`` = (x, y, z) in metres."""
+
+    name: str = MISSING
+    size: List[float] = MISSING
+
+
+@dataclass
+class BoxesConfig:
+    """The box set that heaps are drawn from (uniformly over ``types``)."""
+
+    name: str = "paper"
+    types: List[BoxType] = field(default_factory=list)
+    density: float = 400.0  # kg/m^3
+    lateral_friction: float = 0.5
+    min_count: int = 0
+    max_count: int = 20
+
+
+@dataclass
+class PhysicsConfig:
+    """pybullet settings and the rest criterion (see ``../shared/notes/simulation.md``)."""
+
+    time_step: float = 1.0 / 240.0
+    solver_iterations: int = 50
+    gravity: float = -9.81
+    drop_height_above_bin_floor: float = 0.625
+    drop_interval_steps: int = 20  # "trickle": one box every N steps
+    drop_margin: float = 0.03  # keep drop xy this far inside the bin walls
+    rest_linear_speed: float = 0.005  # m/s
+    rest_angular_speed: float = 0.05  # rad/s
+    rest_check_interval_steps: int = 10
+    rest_checks_in_a_row: int = 5
+    max_settle_steps: int = 3000
+
+
+@dataclass
+class SensorConfig:
+    """Optional depth-sensor model applied after rendering (``enabled: false`` = ideal depth).
+
+    Noise: Gaussian with sigma(z) = ``noise_sigma_at_1m`` · z² (metres), the quadratic growth
+    of structured-light / active-stereo sensors. Edge dropout: pixels whose depth differs from a
+    4-neighbour by more than ``edge_jump`` are set to 0 (no data) with probability
+    ``edge_dropout_prob``. Quantisation: depth rounded to ``quantisation_step`` metres.
+    """
+
+    name: str = "ideal"
+    enabled: bool = False
+    noise_sigma_at_1m: float = 0.0
+    edge_jump: float = 0.01
+    edge_dropout_prob: float = 0.0
+    quantisation_step: float = 0.0
+
+
+@dataclass
+class GenerateConfig:
+    """The generation stage: heaps per split, storage, parallelism."""
+
+    num_scenes: int = MISSING  # training scenes; validation and test are given separately
+    num_val_scenes: int = MISSING
+    num_test_scenes: int = MISSING
+    scenes_per_shard: int = 50
+    depth_unit: float = 1.0e-4  # stored depth = round(depth_m / depth_unit) as uint16 (0 = no data)
+    workers: int = 0  # 0 = all cores; does not change the artifact
+    force: bool = False  # recompute even if this version exists
+
+
+@dataclass
+class ReportConfig:
+    """The report stage: which artifacts to gather and how many sample images to draw."""
+
+    generate_version: str = "latest"
+    num_sample_images: int = 6
+    force: bool = False
+
+
+@dataclass
+class LoggingConfig:
+    """Rerun / MCAP logging. Not part of any version key: it changes logs only."""
+
+    max_logged_scenes: int = 100  # per stage run; scenes beyond this are stored but not logged
+    progress: bool = True
+
+
+@dataclass
+class PipelineConfig:
+    """The root of every stage's configuration."""
+
+    experiment: str = MISSING
+    seed: int = 0
+    paths: PathsConfig = field(default_factory=PathsConfig)
+    camera: CameraConfig = field(default_factory=CameraConfig)
+    bin: BinConfig = field(default_factory=BinConfig)
+    boxes: BoxesConfig = field(default_factory=BoxesConfig)
+    physics: PhysicsConfig = field(default_factory=PhysicsConfig)
+    sensor: SensorConfig = field(default_factory=SensorConfig)
+    generate: GenerateConfig = field(default_factory=GenerateConfig)
+    report: ReportConfig = field(default_factory=ReportConfig)
+    logging: LoggingConfig = field(default_factory=LoggingConfig)
+
+
+def register_configs() -> None:
+    """Register the schema so YAML files can extend it (``defaults: [pipeline_schema, ...]``)."""
+    cs = ConfigStore.instance()
+    cs.store(name="pipeline_schema", node=PipelineConfig)
+
+
+register_configs()

@@ -1,0 +1,303 @@
+"""The generation stage (paper Sec. 4.3, Fig. 4a): depth images of random box heaps.
+
+``generate(cfg)`` is a pure function of the config: it drops a random heap into the bin for
+every scene of every split, renders the overhead depth image and instance mask, and writes the
+versioned artifact described in ``pipeline.dataset.scenes``. Each scene depends only on its seed
+(base seed, split, index), and shards are fixed by ``generate.scenes_per_shard``, so the
+artifact is byte-identical whatever ``generate.workers`` is.
+
+Command line::
+
+    python -m pipeline.generate experiment=smoke generate.num_scenes=200 generate.workers=2
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import multiprocessing as mp
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import hydra
+import numpy as np
+from omegaconf import DictConfig, OmegaConf
+from tqdm import tqdm
+
+from pipeline.artifacts import compute_version, run_stage, stage_config
+from pipeline.artifacts.store import StageRun
+from pipeline.camera.geometry import Intrinsics, camera_pose_above_bin, pose_matrix
+from pipeline.cli import CONF_DIR, data_root, default_workers, stage_main
+from pipeline.dataset.scenes import SPLIT_CODES, SPLITS, SceneDataset
+from pipeline.dataset.storage import write_npz
+from pipeline.simulation.scene import connect, scene_rng, simulate_scene
+from pipeline.tracking import StageLog, default_blueprint
+
+STAGE = "generate"
+SECTIONS = ("seed", "camera", "bin", "boxes", "physics", "sensor", "generate")
+NOT_AFFECTING_RESULT = ("generate.workers", "generate.force")
+
+
+@dataclass(frozen=True)
+class ShardTask:
+    split: str
+    shard: int
+    first: int  # first scene index (within the split)
+    count: int
+    path: str  # output file
+
+
+@dataclass
+class ShardSummary:
+    task: ShardTask
+    num_boxes: np.ndarray
+    num_removed: np.ndarray
+    settle_steps: np.ndarray
+    settled: np.ndarray
+    seconds: float
+
+
+def split_sizes(gcfg) -> dict[str, int]:
+    sizes = {"train": gcfg.num_scenes, "val": gcfg.num_val_scenes, "test": gcfg.num_test_scenes}
+    for split, n in sizes.items():
+        if n < 0:
+            raise ValueError(f"number of {split} scenes must be >= 0, got {n}")
+    return sizes
+
+
+def plan_shards(gcfg, out_dir: Path) -> list[ShardTask]:
+    """Fixed shards of ``scenes_per_shard`` consecutive scenes per split."""
+    if gcfg.scenes_per_shard < 1:
+        raise ValueError(f"generate.scenes_per_shard must be >= 1, got {gcfg.scenes_per_shard}")
+    tasks = []
+    for split, n in split_sizes(gcfg).items():
+        for k in range(math.ceil(n / gcfg.scenes_per_shard)):
+            first = k * gcfg.scenes_per_shard
+            count = min(gcfg.scenes_per_shard, n - first)
+            tasks.append(ShardTask(split, k, first, count,
+                                   str(out_dir / "scenes" / f"{split}-{k:05d}.npz")))
+    return tasks
+
+
+_CLIENT: int | None = None
+_CFG = None
+
+
+def _init_worker(cfg_obj) -> None:
+    global _CLIENT, _CFG
+    _CLIENT = connect()
+    _CFG = cfg_obj
+
+
+def generate_shard(task: ShardTask) -> ShardSummary:
+    """Simulate and store one shard's scenes (runs in a worker process)."""
+    cfg = _CFG
+    t0 = time.perf_counter()
+    T_world_cam = camera_pose_above_bin(cfg.camera.height_above_bin_floor)
+    T_cam_world = np.linalg.inv(T_world_cam)
+    unit = cfg.generate.depth_unit
+    max_depth = 65535 * unit
+    cols: dict[str, list] = {k: [] for k in (
+        "depth", "mask", "scene_index", "seed", "num_boxes", "num_dropped", "num_removed",
+        "settle_steps", "settled", "box_type", "box_size", "box_T_world", "box_T_cam")}
+    for index in range(task.first, task.first + task.count):
+        seed = (cfg.seed, SPLIT_CODES[task.split], index)
+        scene = simulate_scene(_CLIENT, cfg, scene_rng(*seed))
+        if float(scene.depth_m.max(initial=0.0)) > max_depth:
+            raise ValueError(f"depth beyond {max_depth:.2f} m cannot be stored with "
+                             f"generate.depth_unit={unit}; increase the unit")
+        cols["depth"].append(np.round(scene.depth_m / unit).astype(np.uint16))
+        cols["mask"].append(scene.mask)
+        cols["scene_index"].append(index)
+        cols["seed"].append(seed)
+        cols["num_boxes"].append(len(scene.boxes))
+        cols["num_dropped"].append(scene.num_dropped)
+        cols["num_removed"].append(scene.num_removed)
+        cols["settle_steps"].append(scene.settle_steps)
+        cols["settled"].append(scene.settled)
+        for box in scene.boxes:
+            T_world_box = pose_matrix(box.position, box.quat_xyzw)
+            cols["box_type"].append(box.type_index)
+            cols["box_size"].append(box.size)
+            cols["box_T_world"].append(T_world_box)
+            cols["box_T_cam"].append(T_cam_world @ T_world_box)
+    H, W = cfg.camera.height, cfg.camera.width
+    arrays = {
+        "depth": np.stack(cols["depth"]).astype(np.uint16),
+        "mask": np.stack(cols["mask"]).astype(np.uint8),
+        "scene_index": np.asarray(cols["scene_index"], dtype=np.int64),
+        "seed": np.asarray(cols["seed"], dtype=np.int64).reshape(-1, 3),
+        "num_boxes": np.asarray(cols["num_boxes"], dtype=np.int32),
+        "num_dropped": np.asarray(cols["num_dropped"], dtype=np.int32),
+        "num_removed": np.asarray(cols["num_removed"], dtype=np.int32),
+        "settle_steps": np.asarray(cols["settle_steps"], dtype=np.int32),
+        "settled": np.asarray(cols["settled"], dtype=bool),
+        "box_type": np.asarray(cols["box_type"], dtype=np.int16),
+        "box_size": np.asarray(cols["box_size"], dtype=np.float64).reshape(-1, 3),
+        "box_T_world": np.asarray(cols["box_T_world"], dtype=np.float64).reshape(-1, 4, 4),
+        "box_T_cam": np.asarray(cols["box_T_cam"], dtype=np.float64).reshape(-1, 4, 4),
+    }
+    assert arrays["depth"].shape == (task.count, H, W)
+    Path(task.path).parent.mkdir(parents=True, exist_ok=True)
+    write_npz(Path(task.path), arrays)
+    return ShardSummary(task, arrays["num_boxes"], arrays["num_removed"],
+                        arrays["settle_steps"], arrays["settled"], time.perf_counter() - t0)
+
+
+def run_shards(tasks: list[ShardTask], cfg_obj, workers: int, progress: bool = True):
+    """Yield each shard's summary in task order, computed by ``workers`` processes."""
+    total = sum(t.count for t in tasks)
+    bar = tqdm(total=total, unit="scene", desc=STAGE, disable=not progress, smoothing=0.1)
+    try:
+        if workers <= 1:
+            _init_worker(cfg_obj)
+            for task in tasks:
+                summary = generate_shard(task)
+                bar.update(task.count)
+                yield summary
+            return
+        # fork: workers start in milliseconds and callers need no `if __name__ == "__main__"`
+        # guard. Safe here because no log stream or pybullet client is open in the parent yet.
+        ctx = mp.get_context("fork")
+        with ctx.Pool(workers, initializer=_init_worker, initargs=(cfg_obj,)) as pool:
+            for summary in pool.imap(generate_shard, tasks, chunksize=1):
+                bar.update(summary.task.count)
+                yield summary
+    finally:
+        bar.close()
+
+
+def _log_quota(sizes: dict[str, int], max_logged: int) -> dict[str, int]:
+    total = sum(sizes.values())
+    if total == 0:
+        return {s: 0 for s in sizes}
+    return {s: min(n, math.ceil(max_logged * n / total)) for s, n in sizes.items()}
+
+
+def _log_static(log: StageLog, cfg_obj) -> None:
+    b = cfg_obj.bin
+    t, ft = b.wall_thickness, b.floor_thickness
+    lx, ly, h = b.inner_length_x, b.inner_width_y, b.wall_height
+    centers = [[0, 0, -ft / 2], [-(lx + t) / 2, 0, (h - ft) / 2], [(lx + t) / 2, 0, (h - ft) / 2],
+               [0, -(ly + t) / 2, (h - ft) / 2], [0, (ly + t) / 2, (h - ft) / 2]]
+    sizes = [[lx + 2 * t, ly + 2 * t, ft], [t, ly + 2 * t, h + ft], [t, ly + 2 * t, h + ft],
+             [lx, t, h + ft], [lx, t, h + ft]]
+    log.log_static_boxes("world/bin", np.asarray(centers, float), np.asarray(sizes, float),
+                         np.tile([0.0, 0.0, 0.0, 1.0], (5, 1)), labels=["floor"] + ["wall"] * 4)
+
+
+def _log_scene(log: StageLog, scene, log_index: int, dt: float) -> None:
+    log.set_time(sequences={"scene": log_index},
+                 durations_s={"sim_time": scene.settle_steps * dt},
+                 clock_ns=log_index * 1_000_000_000)
+    log.log_camera("world/camera", scene.intrinsics, scene.T_world_cam)
+    log.log_depth("world/camera/depth", scene.depth_m)
+    log.log_segmentation("world/camera/mask", scene.mask)
+    centers = np.array([b.T_world_box[:3, 3] for b in scene.boxes]).reshape(-1, 3)
+    sizes = np.array([b.size for b in scene.boxes]).reshape(-1, 3)
+    quats = np.array([_quat_xyzw(b.T_world_box[:3, :3]) for b in scene.boxes]).reshape(-1, 4)
+    log.log_boxes("world/boxes", centers, sizes, quats,
+                  labels=[f"{b.instance}:{b.type_name}" for b in scene.boxes])
+    log.log_scalar("metrics/boxes_per_scene", float(len(scene.boxes)))
+    log.log_text("log", f"{scene.split} scene {scene.index}: {len(scene.boxes)} boxes at rest "
+                        f"after {scene.settle_steps} steps (seed {scene.seed})")
+
+
+def _quat_xyzw(R: np.ndarray) -> np.ndarray:
+    """Unit quaternion (x, y, z, w) of a rotation matrix."""
+    w = math.sqrt(max(0.0, 1.0 + R[0, 0] + R[1, 1] + R[2, 2])) / 2
+    x = math.sqrt(max(0.0, 1.0 + R[0, 0] - R[1, 1] - R[2, 2])) / 2
+    y = math.sqrt(max(0.0, 1.0 - R[0, 0] + R[1, 1] - R[2, 2])) / 2
+    z = math.sqrt(max(0.0, 1.0 - R[0, 0] - R[1, 1] + R[2, 2])) / 2
+    x = math.copysign(x, R[2, 1] - R[1, 2])
+    y = math.copysign(y, R[0, 2] - R[2, 0])
+    z = math.copysign(z, R[1, 0] - R[0, 1])
+    return np.array([x, y, z, w])
+
+
+def _metrics(summaries: list[ShardSummary], sizes: dict[str, int], max_count: int) -> dict:
+    out: dict = {"scenes": dict(sizes), "splits": {}}
+    for split in SPLITS:
+        ss = [s for s in summaries if s.task.split == split]
+        if not ss:
+            out["splits"][split] = {"scenes": 0}
+            continue
+        nb = np.concatenate([s.num_boxes for s in ss])
+        steps = np.concatenate([s.settle_steps for s in ss])
+        out["splits"][split] = {
+            "scenes": int(len(nb)),
+            "boxes": int(nb.sum()),
+            "boxes_per_scene_mean": round(float(nb.mean()), 3),
+            "boxes_per_scene_histogram": np.bincount(nb, minlength=max_count + 1).tolist(),
+            "boxes_removed_outside_bin": int(np.concatenate([s.num_removed for s in ss]).sum()),
+            "scenes_not_settled": int((~np.concatenate([s.settled for s in ss])).sum()),
+            "settle_steps_median": float(np.median(steps)),
+            "settle_steps_p90": float(np.percentile(steps, 90)),
+        }
+    return out
+
+
+def generate(cfg: DictConfig) -> Path:
+    """Run the generation stage; returns the artifact folder (reused if it already exists)."""
+    config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
+    version = compute_version(STAGE, config, upstream={})
+    cfg_obj = OmegaConf.to_object(cfg)  # plain dataclasses: fast, picklable for the workers
+    sizes = split_sizes(cfg_obj.generate)
+    if not cfg_obj.boxes.types:
+        raise ValueError("boxes.types is empty: the box set needs at least one box type")
+    workers = default_workers(cfg_obj.generate.workers)
+
+    def body(run: StageRun) -> None:
+        intr = Intrinsics.from_config(cfg_obj.camera)
+        T_world_cam = camera_pose_above_bin(cfg_obj.camera.height_above_bin_floor)
+        (run.work_dir / "camera.json").write_text(json.dumps({
+            "intrinsics": intr.as_dict(),
+            "T_world_cam": T_world_cam.tolist(),
+            "depth_unit": cfg_obj.generate.depth_unit,
+            "frames": {"camera": "OpenCV: x right, y down, z forward; metres",
+                       "world": "z up; origin at the centre of the bin floor's top surface"},
+            "bin": OmegaConf.to_container(cfg.bin, resolve=True),
+            "box_types": OmegaConf.to_container(cfg.boxes.types, resolve=True),
+        }, indent=2) + "\n")
+        tasks = plan_shards(cfg_obj.generate, run.work_dir)
+        index = {"splits": {s: [] for s in SPLITS}}
+        for t in tasks:
+            index["splits"][t.split].append({
+                "file": Path(t.path).relative_to(run.work_dir).as_posix(),
+                "first": t.first, "count": t.count})
+        (run.work_dir / "index.json").write_text(json.dumps(index, indent=2) + "\n")
+
+        t0 = time.perf_counter()
+        summaries = list(run_shards(tasks, cfg_obj, workers, cfg_obj.logging.progress))
+        run.timings["simulate_s"] = round(time.perf_counter() - t0, 3)
+        run.timings["workers"] = workers
+        n_total = sum(sizes.values())
+        run.timings["scenes_per_s"] = round(n_total / max(run.timings["simulate_s"], 1e-9), 3)
+
+        t1 = time.perf_counter()
+        quota = _log_quota(sizes, cfg_obj.logging.max_logged_scenes)
+        with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version,
+                      blueprint=default_blueprint()) as log:
+            _log_static(log, cfg_obj)
+            log_index = 0
+            for split in SPLITS:
+                ds = SceneDataset(run.work_dir, split)
+                for i in range(quota[split]):
+                    _log_scene(log, ds[i], log_index, cfg_obj.physics.time_step)
+                    log_index += 1
+        run.timings["log_s"] = round(time.perf_counter() - t1, 3)
+        run.metrics.update(_metrics(summaries, sizes, cfg_obj.boxes.max_count))
+        run.metrics["logged_scenes"] = log_index
+
+    return run_stage(data_root(cfg), STAGE, version, config, {}, body,
+                     seed=cfg_obj.seed, force=cfg_obj.generate.force)
+
+
+@hydra.main(config_path=CONF_DIR, config_name="generate", version_base="1.3")
+def main(cfg: DictConfig) -> None:
+    stage_main(generate)(cfg)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,193 @@
+"""Dropping a random heap of boxes into a bin and letting it come to rest (paper Sec. 4.3).
+
+World frame: z up, origin at the centre of the bin floor's top surface; metres, seconds.
+The bin's inner walls are at x = ±inner_length_x/2 and y = ±inner_width_y/2; its floor
+spans z ∈ [−floor_thickness, 0] and stands on the ground (top at z = −floor_thickness).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pybullet as p
+
+
+@dataclass
+class BoxPose:
+    """One box at rest.
+
+    Attributes:
+        type_index: index into the box set's ``types``.
+        size: (3,) edge lengths along the box's own x, y, z axes, metres.
+        position: (3,) centre in the world frame, metres.
+        quat_xyzw: (4,) orientation in the world frame, unit quaternion (x, y, z, w).
+        body_id: pybullet body unique id in the current simulation.
+    """
+
+    type_index: int
+    size: np.ndarray
+    position: np.ndarray
+    quat_xyzw: np.ndarray
+    body_id: int
+
+
+@dataclass
+class HeapResult:
+    """The heap after settling: boxes still in the bin, and what it took to get there."""
+
+    boxes: list[BoxPose]
+    num_dropped: int
+    num_removed: int  # boxes that came to rest outside the bin and were removed
+    settle_steps: int  # physics steps from the first drop until rest was declared
+    settled: bool  # False when max_settle_steps was reached first
+
+
+def _static_box(client: int, half_extents, position, rgba, friction: float) -> int:
+    col = p.createCollisionShape(p.GEOM_BOX, halfExtents=half_extents, physicsClientId=client)
+    vis = p.createVisualShape(p.GEOM_BOX, halfExtents=half_extents, rgbaColor=rgba,
+                              physicsClientId=client)
+    body = p.createMultiBody(0.0, col, vis, basePosition=position, physicsClientId=client)
+    p.changeDynamics(body, -1, lateralFriction=friction, physicsClientId=client)
+    return body
+
+
+def build_cell(client: int, bin_cfg, physics_cfg) -> list[int]:
+    """Reset the simulation and build the ground and the bin.
+
+    Returns their body ids: ``[ground, bin floor, wall −x, wall +x, wall −y, wall +y]``.
+    The ground's top surface is at world z = −floor_thickness.
+    """
+    p.resetSimulation(physicsClientId=client)
+    p.setGravity(0, 0, physics_cfg.gravity, physicsClientId=client)
+    p.setPhysicsEngineParameter(
+        fixedTimeStep=physics_cfg.time_step,
+        numSolverIterations=physics_cfg.solver_iterations,
+        deterministicOverlappingPairs=1,
+        physicsClientId=client,
+    )
+    t, ft = bin_cfg.wall_thickness, bin_cfg.floor_thickness
+    lx, ly, h = bin_cfg.inner_length_x, bin_cfg.inner_width_y, bin_cfg.wall_height
+    fr = bin_cfg.lateral_friction
+    blue = [0.2, 0.3, 0.8, 1]
+    bodies = [
+        # Ground: a collision slab, drawn invisible; the renderer fills its depth analytically
+        # (see pipeline.camera.render.render_depth(ground=...)).
+        _static_box(client, [1.0, 1.0, 0.01], [0, 0, -ft - 0.01], [1, 1, 1, 0], fr),
+        _static_box(client, [lx / 2 + t, ly / 2 + t, ft / 2], [0, 0, -ft / 2], blue, fr),
+    ]
+    wall_z = (h - ft) / 2.0  # walls run from the ground up to h above the bin floor
+    half_h = (h + ft) / 2.0
+    for sx in (-1, 1):
+        bodies.append(_static_box(client, [t / 2, ly / 2 + t, half_h],
+                                  [sx * (lx / 2 + t / 2), 0, wall_z], blue, fr))
+    for sy in (-1, 1):
+        bodies.append(_static_box(client, [lx / 2, t / 2, half_h],
+                                  [0, sy * (ly / 2 + t / 2), wall_z], blue, fr))
+    return bodies
+
+
+def random_quaternion(rng: np.random.Generator) -> np.ndarray:
+    """A uniformly distributed unit quaternion (x, y, z, w) with w ≥ 0."""
+    q = rng.normal(size=4)
+    q /= np.linalg.norm(q)
+    return q if q[3] >= 0 else -q
+
+
+def _is_at_rest(client: int, body_ids: list[int], lin: float, ang: float) -> bool:
+    for body in body_ids:
+        v, w = p.getBaseVelocity(body, physicsClientId=client)
+        if v[0] * v[0] + v[1] * v[1] + v[2] * v[2] > lin * lin:
+            return False
+        if w[0] * w[0] + w[1] * w[1] + w[2] * w[2] > ang * ang:
+            return False
+    return True
+
+
+def settle(client: int, body_ids: list[int], physics_cfg, max_steps: int) -> tuple[int, bool]:
+    """Step until every body is at rest for ``rest_checks_in_a_row`` consecutive checks.
+
+    Returns (steps taken, whether rest was reached within ``max_steps``).
+    """
+    every = physics_cfg.rest_check_interval_steps
+    in_a_row, steps = 0, 0
+    while steps < max_steps:
+        for _ in range(every):
+            p.stepSimulation(physicsClientId=client)
+        steps += every
+        if _is_at_rest(client, body_ids, physics_cfg.rest_linear_speed,
+                       physics_cfg.rest_angular_speed):
+            in_a_row += 1
+            if in_a_row >= physics_cfg.rest_checks_in_a_row:
+                return steps, True
+        else:
+            in_a_row = 0
+    return steps, False
+
+
+def _inside_bin(position: np.ndarray, bin_cfg) -> bool:
+    return (abs(position[0]) < bin_cfg.inner_length_x / 2
+            and abs(position[1]) < bin_cfg.inner_width_y / 2
+            and -0.005 < position[2] < bin_cfg.wall_height + 0.1)
+
+
+def drop_heap(client: int, rng: np.random.Generator, boxes_cfg, bin_cfg, physics_cfg) -> HeapResult:
+    """Drop a random number of random boxes one by one ("trickle"), settle, remove escapees.
+
+    Random draws, in this order: the count, then per box its type, x, y and orientation.
+    """
+    n = int(rng.integers(boxes_cfg.min_count, boxes_cfg.max_count + 1))
+    sizes = [np.asarray(t.size, dtype=np.float64) for t in boxes_cfg.types]
+    shapes = []
+    for size in sizes:
+        half = (size / 2).tolist()
+        shapes.append((
+            p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client),
+            p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=[0.8, 0.6, 0.4, 1],
+                                physicsClientId=client),
+        ))
+    margin = physics_cfg.drop_margin
+    hx = bin_cfg.inner_length_x / 2 - margin
+    hy = bin_cfg.inner_width_y / 2 - margin
+    bodies: list[tuple[int, int]] = []  # (body id, type index)
+    steps = 0
+    for i in range(n):
+        k = int(rng.integers(len(sizes)))
+        x, y = rng.uniform(-hx, hx), rng.uniform(-hy, hy)
+        q = random_quaternion(rng)
+        mass = boxes_cfg.density * float(np.prod(sizes[k]))
+        body = p.createMultiBody(mass, shapes[k][0], shapes[k][1],
+                                 basePosition=[x, y, physics_cfg.drop_height_above_bin_floor],
+                                 baseOrientation=q.tolist(), physicsClientId=client)
+        p.changeDynamics(body, -1, lateralFriction=boxes_cfg.lateral_friction,
+                         physicsClientId=client)
+        bodies.append((body, k))
+        if i < n - 1:
+            for _ in range(physics_cfg.drop_interval_steps):
+                p.stepSimulation(physicsClientId=client)
+            steps += physics_cfg.drop_interval_steps
+    ids = [b for b, _ in bodies]
+    settle_steps, settled = settle(client, ids, physics_cfg, physics_cfg.max_settle_steps)
+    steps += settle_steps
+
+    removed = 0
+    for body, _ in list(bodies):
+        pos, _ = p.getBasePositionAndOrientation(body, physicsClientId=client)
+        if not _inside_bin(np.asarray(pos), bin_cfg):
+            p.removeBody(body, physicsClientId=client)
+            bodies = [(b, k) for b, k in bodies if b != body]
+            removed += 1
+    if removed and bodies:
+        # Removing a box can unsettle a neighbour leaning on it: settle again.
+        extra, settled_again = settle(client, [b for b, _ in bodies], physics_cfg,
+                                      physics_cfg.max_settle_steps)
+        steps += extra
+        settled = settled and settled_again
+
+    out = []
+    for body, k in bodies:
+        pos, quat = p.getBasePositionAndOrientation(body, physicsClientId=client)
+        out.append(BoxPose(type_index=k, size=sizes[k].copy(), position=np.asarray(pos),
+                           quat_xyzw=np.asarray(quat), body_id=body))
+    return HeapResult(boxes=out, num_dropped=n, num_removed=removed, settle_steps=steps,
+                      settled=settled)

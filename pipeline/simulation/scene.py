@@ -1,0 +1,74 @@
+"""One synthetic scene: a heap dropped into the bin, at rest, seen by the overhead camera."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pybullet as p
+
+from pipeline.camera.geometry import Intrinsics, camera_pose_above_bin, pose_matrix
+from pipeline.camera.render import render_depth
+from pipeline.camera.sensor import apply_sensor_model
+from pipeline.simulation.heap import BoxPose, build_cell, drop_heap
+
+
+@dataclass
+class SimulatedScene:
+    """A rendered heap.
+
+    Attributes:
+        depth_m: (H, W) float32 z-depth, metres (0 = no data, only with a sensor model).
+        mask: (H, W) uint8: 0 = not a box, k = ``boxes[k-1]``.
+        boxes: boxes at rest inside the bin, in drop order.
+        T_world_cam: (4, 4) camera pose (OpenCV axes) in the world frame.
+        num_dropped, num_removed, settle_steps, settled: see ``HeapResult``.
+    """
+
+    depth_m: np.ndarray
+    mask: np.ndarray
+    boxes: list[BoxPose]
+    T_world_cam: np.ndarray
+    num_dropped: int
+    num_removed: int
+    settle_steps: int
+    settled: bool
+
+
+def scene_rng(base_seed: int, split_code: int, index: int) -> np.random.Generator:
+    """The scene's generator: a pure function of (base seed, split, index).
+
+    Distinct (split, index) pairs give distinct seed sequences, so splits never share a seed.
+    """
+    return np.random.default_rng([int(base_seed), int(split_code), int(index)])
+
+
+def simulate_scene(client: int, cfg, rng: np.random.Generator) -> SimulatedScene:
+    """Build the cell, drop a heap, let it rest, render depth and the instance mask.
+
+    ``cfg`` needs the sections ``camera``, ``bin``, ``boxes``, ``physics`` and ``sensor``.
+    """
+    cell = build_cell(client, cfg.bin, cfg.physics)
+    heap = drop_heap(client, rng, cfg.boxes, cfg.bin, cfg.physics)
+    intr = Intrinsics.from_config(cfg.camera)
+    T_world_cam = camera_pose_above_bin(cfg.camera.height_above_bin_floor)
+    frame = render_depth(client, intr, T_world_cam, cfg.camera.near, cfg.camera.far,
+                         renderer=cfg.camera.renderer,
+                         ground=(-cfg.bin.floor_thickness, cell[0]))
+    mask = np.zeros(frame.body_ids.shape, dtype=np.uint8)
+    for k, box in enumerate(heap.boxes, start=1):
+        mask[frame.body_ids == box.body_id] = k
+    depth = apply_sensor_model(frame.depth_m, cfg.sensor, rng)
+    return SimulatedScene(depth_m=depth, mask=mask, boxes=heap.boxes, T_world_cam=T_world_cam,
+                          num_dropped=heap.num_dropped, num_removed=heap.num_removed,
+                          settle_steps=heap.settle_steps, settled=heap.settled)
+
+
+def box_pose_world(box: BoxPose) -> np.ndarray:
+    """(4, 4) pose of the box centre in the world frame."""
+    return pose_matrix(box.position, box.quat_xyzw)
+
+
+def connect() -> int:
+    """A headless pybullet client."""
+    return p.connect(p.DIRECT)
