@@ -223,6 +223,8 @@ def available_versions(data_root: Path, stage: str) -> list[str]:
 def resolve_artifact(data_root: Path, stage: str, version: str = "latest") -> Path:
     """Folder of a complete artifact, by version key or ``"latest"``; a clear error otherwise."""
     stage_dir = Path(data_root) / stage
+    if not version or version.startswith(".") or "/" in version or "\\" in version:
+        raise ArtifactError(f"'{version}' is not a version name: give a version key or 'latest'.")
     folder = stage_dir / version
     if (folder / MANIFEST).is_file():
         return folder.resolve()

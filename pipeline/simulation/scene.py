@@ -55,9 +55,12 @@ def simulate_scene(client: int, cfg, rng: np.random.Generator) -> SimulatedScene
     frame = render_depth(client, intr, T_world_cam, cfg.camera.near, cfg.camera.far,
                          renderer=cfg.camera.renderer,
                          ground=(-cfg.bin.floor_thickness, cell[0]))
-    mask = np.zeros(frame.body_ids.shape, dtype=np.uint8)
+    # body id -> instance number (1-based; 0 for everything that is not a kept box)
+    lut = np.zeros(int(frame.body_ids.max(initial=-1)) + 2, dtype=np.uint8)
     for k, box in enumerate(heap.boxes, start=1):
-        mask[frame.body_ids == box.body_id] = k
+        if box.body_id + 1 < len(lut):
+            lut[box.body_id + 1] = k
+    mask = lut[frame.body_ids + 1]
     depth = apply_sensor_model(frame.depth_m, cfg.sensor, rng)
     return SimulatedScene(depth_m=depth, mask=mask, boxes=heap.boxes, T_world_cam=T_world_cam,
                           num_dropped=heap.num_dropped, num_removed=heap.num_removed,

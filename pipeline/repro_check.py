@@ -1,0 +1,85 @@
+"""Reproducibility check (``make repro-check``): run the smoke pipeline twice, compare artifacts.
+
+Each run goes into a fresh ``paths.root``; for every stage the two artifacts must have the same
+version and the same sha256 for every file. Rerun logs are not byte-stable (chunk ids carry a
+time stamp), so ``log.rrd`` files are compared by content with ``rerun rrd compare``.
+
+    python -m pipeline.repro_check [--keep] [--workdir DIR]
+
+Exit status 0 when everything matches, 1 on any difference (each one is printed).
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from pipeline.artifacts.store import load_manifest, resolve_artifact
+from pipeline.tracking import rrd_equal
+
+# The smoke pipeline, in order; later issues append their stages here.
+STAGES = ("generate", "report")
+
+
+def run_pipeline(root: Path, extra: list[str]) -> None:
+    for stage in STAGES:
+        cmd = [sys.executable, "-m", f"pipeline.{stage}", "experiment=smoke",
+               f"paths.root={root}", "logging.progress=false", *extra]
+        print("$", " ".join(cmd), flush=True)
+        subprocess.run(cmd, check=True)
+
+
+def compare(root_a: Path, root_b: Path) -> list[str]:
+    """Differences between the two runs' artifacts (empty when identical)."""
+    diffs = []
+    for stage in STAGES:
+        a = resolve_artifact(root_a / "data", stage)
+        b = resolve_artifact(root_b / "data", stage)
+        if a.name != b.name:
+            diffs.append(f"{stage}: versions differ ({a.name} vs {b.name})")
+            continue
+        fa, fb = load_manifest(a)["files"], load_manifest(b)["files"]
+        for rel in sorted(set(fa) | set(fb)):
+            if rel not in fa or rel not in fb:
+                diffs.append(f"{stage}/{rel}: present in only one run")
+            elif rel.endswith(".rrd"):
+                if not rrd_equal(a / rel, b / rel):
+                    diffs.append(f"{stage}/{rel}: Rerun recordings differ (rerun rrd compare)")
+            elif fa[rel]["sha256"] != fb[rel]["sha256"]:
+                diffs.append(f"{stage}/{rel}: sha256 differs")
+        print(f"[repro-check] {stage} {a.name}: {len(fa)} files compared")
+    return diffs
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--workdir", type=Path, default=None,
+                        help="where to put the two runs (default: a temporary folder)")
+    parser.add_argument("--keep", action="store_true", help="keep the two runs' folders")
+    parser.add_argument("overrides", nargs="*", help="extra Hydra overrides for every stage")
+    args = parser.parse_args(argv)
+    work = Path(tempfile.mkdtemp(prefix="repro-check-", dir=args.workdir))
+    try:
+        for name in ("run1", "run2"):
+            run_pipeline(work / name, args.overrides)
+        diffs = compare(work / "run1", work / "run2")
+    finally:
+        if not args.keep:
+            shutil.rmtree(work, ignore_errors=True)
+        else:
+            print(f"[repro-check] runs kept in {work}")
+    if diffs:
+        print("[repro-check] FAILED: the two runs differ:")
+        for d in diffs:
+            print("  " + d)
+        return 1
+    print("[repro-check] OK: both runs produced identical artifacts")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
