@@ -44,6 +44,7 @@ matplotlib.use("Agg")
 
 import numpy as np  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
+from matplotlib.ticker import MaxNLocator  # noqa: E402
 from omegaconf import DictConfig  # noqa: E402
 
 from pipeline.artifacts import (  # noqa: E402
@@ -61,7 +62,7 @@ from pipeline.tracking import StageLog  # noqa: E402
 
 STAGE = "report"
 SECTIONS = ("report",)
-NOT_AFFECTING_RESULT = ("report.force",)
+NOT_AFFECTING_RESULT = ("report.force", "report.generate_version")  # upstream version covers it
 
 PUBLISHED = ("README.md", "figures", "tables")
 FIG_DPI = 100
@@ -323,6 +324,7 @@ def figure_boxes_per_scene(splits: dict[str, dict], max_count: int, path: Path) 
         drawn = True
     ax.set_xlabel("boxes at rest in the bin per scene")
     ax.set_ylabel("scenes")
+    ax.yaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_xticks(x[::2] if max_count > 10 else x)
     ax.set_xlim(-0.6, max_count + 0.6)
     if drawn:
@@ -357,12 +359,11 @@ def render_readme(version: str, upstream: dict[str, tuple[str, dict]], tables: d
         "",
         "## Artifacts used",
         "",
-        "| stage | version | git commit | experiment |",
-        "|---|---|---|---|",
+        "| stage | version | git commit |",
+        "|---|---|---|",
     ]
     for stage, (ver, manifest) in upstream.items():
-        exp = manifest.get("config", {}).get("experiment") or "not recorded"
-        out.append(f"| {stage} | `{ver}` | {_commit(manifest)} | {exp} |")
+        out.append(f"| {stage} | `{ver}` | {_commit(manifest)} |")
     out += [
         "",
         "Each artifact lives in `data/<stage>/<version>/`; its `manifest.json` holds the full "

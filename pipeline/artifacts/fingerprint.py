@@ -23,6 +23,7 @@ KEY_PACKAGES = (
     "mcap",
     "foxglove-sdk",
     "hydra-core",
+    "matplotlib",
     "omegaconf",
 )
 
