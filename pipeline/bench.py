@@ -10,6 +10,7 @@ trickle drop and rest test, same TinyRenderer frame) measured in the same run.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import tempfile
@@ -20,60 +21,75 @@ import numpy as np
 import pybullet as p
 
 
-def bare_loop(num_scenes: int, cfg) -> float:
-    """Scenes per second of a minimal settle + render loop (no storage, no logging)."""
+def bare_loop(num_scenes: int, cfg, seed: int) -> float:
+    """Scenes per second of a minimal settle + render loop (no storage, no logging).
+
+    It draws the same heaps as the stage (same seeds, same order of random draws), drops them
+    the same way, applies the same rest test and renders one TinyRenderer frame, so the ratio
+    of the two rates is the stage's overhead.
+    """
     client = p.connect(p.DIRECT)
-    W = H = 416
-    view = p.computeViewMatrix([0, 0, 0.625], [0, 0, 0], [0, 1, 0])
-    proj = p.computeProjectionMatrixFOV(53.6, 1.0, 0.1, 2.0)
+    W, H = cfg.camera.width, cfg.camera.height
+    view = p.computeViewMatrix([0, 0, cfg.camera.height_above_bin_floor], [0, 0, 0], [0, 1, 0])
+    proj = p.computeProjectionMatrixFOV(53.6, W / H, cfg.camera.near, cfg.camera.far)
     sizes = [np.asarray(t.size) for t in cfg.boxes.types]
+    b, ph = cfg.bin, cfg.physics
+    lx, ly, h, t, ft = (b.inner_length_x, b.inner_width_y, b.wall_height, b.wall_thickness,
+                        b.floor_thickness)
+    parts = [([lx / 2 + t, ly / 2 + t, ft / 2], [0, 0, -ft / 2]),
+             ([t / 2, ly / 2 + t, (h + ft) / 2], [-(lx + t) / 2, 0, (h - ft) / 2]),
+             ([t / 2, ly / 2 + t, (h + ft) / 2], [(lx + t) / 2, 0, (h - ft) / 2]),
+             ([lx / 2, t / 2, (h + ft) / 2], [0, -(ly + t) / 2, (h - ft) / 2]),
+             ([lx / 2, t / 2, (h + ft) / 2], [0, (ly + t) / 2, (h - ft) / 2])]
+    hx, hy = lx / 2 - ph.drop_margin, ly / 2 - ph.drop_margin
     t0 = time.perf_counter()
     for i in range(num_scenes):
-        rng = np.random.default_rng([cfg.seed, 9, i])
+        rng = np.random.default_rng([seed, 0, i])
         p.resetSimulation(physicsClientId=client)
-        p.setGravity(0, 0, -9.81, physicsClientId=client)
-        p.setPhysicsEngineParameter(fixedTimeStep=1 / 240, numSolverIterations=50,
+        p.setGravity(0, 0, ph.gravity, physicsClientId=client)
+        p.setPhysicsEngineParameter(fixedTimeStep=ph.time_step,
+                                    numSolverIterations=ph.solver_iterations,
                                     physicsClientId=client)
-        ground = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=client)
-        p.createMultiBody(0, ground, basePosition=[0, 0, -0.02], physicsClientId=client)
-        lx, ly, h, t = 0.40, 0.30, 0.15, 0.01
-        parts = [([lx / 2 + t, ly / 2 + t, 0.01], [0, 0, -0.01]),
-                 ([t / 2, ly / 2 + t, h / 2], [-(lx + t) / 2, 0, h / 2 - 0.02]),
-                 ([t / 2, ly / 2 + t, h / 2], [(lx + t) / 2, 0, h / 2 - 0.02]),
-                 ([lx / 2, t / 2, h / 2], [0, -(ly + t) / 2, h / 2 - 0.02]),
-                 ([lx / 2, t / 2, h / 2], [0, (ly + t) / 2, h / 2 - 0.02])]
+        # Ground: the same invisible 2 m slab as the stage (drawing it costs ~40 ms a frame).
+        ground = p.createCollisionShape(p.GEOM_BOX, halfExtents=[1, 1, 0.01],
+                                        physicsClientId=client)
+        plane = p.createMultiBody(0, ground, basePosition=[0, 0, -ft - 0.01],
+                                  physicsClientId=client)
+        p.changeVisualShape(plane, -1, rgbaColor=[1, 1, 1, 0], physicsClientId=client)
         for half, pos in parts:
             col = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client)
             vis = p.createVisualShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client)
             p.createMultiBody(0, col, vis, basePosition=pos, physicsClientId=client)
         bodies = []
-        for j in range(int(rng.integers(0, 21))):
+        n = int(rng.integers(cfg.boxes.min_count, cfg.boxes.max_count + 1))
+        for j in range(n):
             s = sizes[int(rng.integers(len(sizes)))]
+            x, y = rng.uniform(-hx, hx), rng.uniform(-hy, hy)
+            q = rng.normal(size=4)
             col = p.createCollisionShape(p.GEOM_BOX, halfExtents=(s / 2).tolist(),
                                          physicsClientId=client)
             vis = p.createVisualShape(p.GEOM_BOX, halfExtents=(s / 2).tolist(),
                                       physicsClientId=client)
-            q = rng.normal(size=4)
-            bodies.append(p.createMultiBody(400 * float(np.prod(s)), col, vis,
-                                            basePosition=[rng.uniform(-0.17, 0.17),
-                                                          rng.uniform(-0.12, 0.12), 0.625],
+            bodies.append(p.createMultiBody(cfg.boxes.density * float(np.prod(s)), col, vis,
+                                            basePosition=[x, y, ph.drop_height_above_bin_floor],
                                             baseOrientation=(q / np.linalg.norm(q)).tolist(),
                                             physicsClientId=client))
-            for _ in range(20):
-                p.stepSimulation(physicsClientId=client)
+            if j < n - 1:
+                for _ in range(ph.drop_interval_steps):
+                    p.stepSimulation(physicsClientId=client)
         calm, steps = 0, 0
-        while calm < 5 and steps < 3000:
-            for _ in range(10):
+        while calm < ph.rest_checks_in_a_row and steps < ph.max_settle_steps:
+            for _ in range(ph.rest_check_interval_steps):
                 p.stepSimulation(physicsClientId=client)
-            steps += 10
-            still = all(np.linalg.norm(p.getBaseVelocity(b, physicsClientId=client)[0]) < 0.005
-                        and np.linalg.norm(p.getBaseVelocity(b, physicsClientId=client)[1]) < 0.05
-                        for b in bodies)
+            steps += ph.rest_check_interval_steps
+            vel = [p.getBaseVelocity(body, physicsClientId=client) for body in bodies]
+            still = all(np.linalg.norm(v) < ph.rest_linear_speed
+                        and np.linalg.norm(w) < ph.rest_angular_speed for v, w in vel)
             calm = calm + 1 if still else 0
         _, _, _, depth, seg = p.getCameraImage(W, H, view, proj, renderer=p.ER_TINY_RENDERER,
                                                physicsClientId=client)
         d = np.asarray(depth, np.float32).reshape(H, W)
-        _ = 2.0 * 0.1 / (2.0 - 1.9 * d)
+        _ = cfg.camera.far * cfg.camera.near / (cfg.camera.far - (cfg.camera.far - cfg.camera.near) * d)
     rate = num_scenes / (time.perf_counter() - t0)
     p.disconnect(client)
     return rate
@@ -87,8 +103,7 @@ def render_time_ms(frames: int, cfg) -> float:
 
     client = p.connect(p.DIRECT)
     cell = build_cell(client, cfg.bin, cfg.physics)
-    boxes = cfg.boxes
-    boxes.min_count = boxes.max_count = 20
+    boxes = dataclasses.replace(cfg.boxes, min_count=20, max_count=20)
     drop_heap(client, np.random.default_rng(0), boxes, cfg.bin, cfg.physics)
     intr = Intrinsics.from_config(cfg.camera)
     T = camera_pose_above_bin(cfg.camera.height_above_bin_floor)
@@ -102,6 +117,9 @@ def render_time_ms(frames: int, cfg) -> float:
     return 1000 * float(np.median(times))
 
 
+BENCH_SEED = 12345
+
+
 def stage_rate(num_scenes: int, workers: int) -> float:
     """Scenes per second of ``pipeline.generate`` itself (simulation + storage), from its manifest."""
     from pipeline.artifacts.store import load_manifest
@@ -113,7 +131,7 @@ def stage_rate(num_scenes: int, workers: int) -> float:
             "experiment=smoke", f"paths.root={root}", f"generate.num_scenes={num_scenes}",
             "generate.num_val_scenes=0", "generate.num_test_scenes=0",
             "generate.scenes_per_shard=10", f"generate.workers={workers}",
-            "logging.max_logged_scenes=0", "logging.progress=false", "seed=12345",
+            "logging.max_logged_scenes=0", "logging.progress=false", f"seed={BENCH_SEED}",
         ])
         folder = generate(cfg)
         return float(load_manifest(folder)["timings"]["scenes_per_s"])
@@ -134,7 +152,7 @@ def main(argv: list[str] | None = None) -> int:
     results = {}
     results["render_ms_per_frame"] = render_time_ms(args.render_frames, cfg)
     print(f"render, 416x416 depth + mask, 20 boxes: {results['render_ms_per_frame']:.1f} ms/frame")
-    results["bare_loop_scenes_per_s"] = bare_loop(args.scenes, cfg)
+    results["bare_loop_scenes_per_s"] = bare_loop(args.scenes, cfg, BENCH_SEED)
     print(f"bare pybullet loop, 1 process:          {results['bare_loop_scenes_per_s']:.2f} scenes/s")
     for workers in (1, 2):
         rate = stage_rate(args.scenes, workers)

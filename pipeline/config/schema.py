@@ -50,7 +50,6 @@ class CameraConfig:
     height_above_bin_floor: float = 0.625
     near: float = 0.1
     far: float = 2.0
-    renderer: str = "tiny"  # "tiny" (pybullet TinyRenderer) or "egl" (EGL plugin, Mesa on the CPU)
 
 
 @dataclass

@@ -53,7 +53,6 @@ def simulate_scene(client: int, cfg, rng: np.random.Generator) -> SimulatedScene
     intr = Intrinsics.from_config(cfg.camera)
     T_world_cam = camera_pose_above_bin(cfg.camera.height_above_bin_floor)
     frame = render_depth(client, intr, T_world_cam, cfg.camera.near, cfg.camera.far,
-                         renderer=cfg.camera.renderer,
                          ground=(-cfg.bin.floor_thickness, cell[0]))
     # body id -> instance number (1-based; 0 for everything that is not a kept box)
     lut = np.zeros(int(frame.body_ids.max(initial=-1)) + 2, dtype=np.uint8)
