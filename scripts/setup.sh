@@ -37,8 +37,10 @@ fi
 }
 [ -x $VENV/bin/python ] || "$PYTHON" -m venv $VENV
 echo "[setup] installing pinned packages into $VENV (first time: a few minutes, about 3 GB)"
-$VENV/bin/python -m pip install --quiet --disable-pip-version-check -r requirements.lock
-$VENV/bin/python -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation -e .
+# (this machine's pip config lists local indexes that may not exist: hide those warnings only)
+quiet_pip() { $VENV/bin/python -m pip --disable-pip-version-check "$@" 2> >(grep -v 'WARNING: Location' >&2); }
+quiet_pip install --quiet -r requirements.lock
+quiet_pip install --quiet --no-deps --no-build-isolation -e .
 $VENV/bin/python -c "import pybullet, torch, open3d, cv2, rerun, mcap, foxglove, hydra" \
   || { echo "[setup] ERROR: the environment was installed but an import failed (see above)." >&2; exit 1; }
 $VENV/bin/rerun analytics disable >/dev/null 2>&1 || true

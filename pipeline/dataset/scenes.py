@@ -24,7 +24,7 @@ Each shard holds ``N`` scenes (``generate.scenes_per_shard``) and ``M`` boxes in
     box_T_world   (M, 4, 4) float64  pose of the box centre in the world frame
     box_T_cam     (M, 4, 4) float64  pose of the box centre in the camera frame
 
-Compression: deflate level 1; about 60–120 kB per scene.
+Compression: deflate level 1; about 27 kB per scene (80 MB for the 3,000 scenes of `default`).
 """
 
 from __future__ import annotations
