@@ -27,7 +27,9 @@ from tqdm import tqdm
 
 from pipeline.artifacts import compute_version, run_stage, stage_config
 from pipeline.artifacts.store import StageRun
-from pipeline.camera.geometry import Intrinsics, camera_pose_above_bin, pose_matrix
+from pipeline.camera.geometry import (
+    Intrinsics, camera_pose_above_bin, pose_matrix, quat_from_matrix,
+)
 from pipeline.cli import CONF_DIR, data_root, default_workers, stage_main
 from pipeline.dataset.scenes import SPLIT_CODES, SPLITS, SceneDataset
 from pipeline.dataset.storage import write_npz
@@ -196,24 +198,12 @@ def _log_scene(log: StageLog, scene, log_index: int, dt: float) -> None:
     log.log_segmentation("world/camera/mask", scene.mask)
     centers = np.array([b.T_world_box[:3, 3] for b in scene.boxes]).reshape(-1, 3)
     sizes = np.array([b.size for b in scene.boxes]).reshape(-1, 3)
-    quats = np.array([_quat_xyzw(b.T_world_box[:3, :3]) for b in scene.boxes]).reshape(-1, 4)
+    quats = np.array([quat_from_matrix(b.T_world_box[:3, :3]) for b in scene.boxes]).reshape(-1, 4)
     log.log_boxes("world/boxes", centers, sizes, quats,
                   labels=[f"{b.instance}:{b.type_name}" for b in scene.boxes])
     log.log_scalar("metrics/boxes_per_scene", float(len(scene.boxes)))
     log.log_text("log", f"{scene.split} scene {scene.index}: {len(scene.boxes)} boxes at rest "
                         f"after {scene.settle_steps} steps (seed {scene.seed})")
-
-
-def _quat_xyzw(R: np.ndarray) -> np.ndarray:
-    """Unit quaternion (x, y, z, w) of a rotation matrix."""
-    w = math.sqrt(max(0.0, 1.0 + R[0, 0] + R[1, 1] + R[2, 2])) / 2
-    x = math.sqrt(max(0.0, 1.0 + R[0, 0] - R[1, 1] - R[2, 2])) / 2
-    y = math.sqrt(max(0.0, 1.0 - R[0, 0] + R[1, 1] - R[2, 2])) / 2
-    z = math.sqrt(max(0.0, 1.0 - R[0, 0] - R[1, 1] + R[2, 2])) / 2
-    x = math.copysign(x, R[2, 1] - R[1, 2])
-    y = math.copysign(y, R[0, 2] - R[2, 0])
-    z = math.copysign(z, R[1, 0] - R[0, 1])
-    return np.array([x, y, z, w])
 
 
 def _metrics(summaries: list[ShardSummary], sizes: dict[str, int], max_count: int) -> dict:

@@ -22,7 +22,7 @@ from pipeline.artifacts.store import load_manifest, resolve_artifact
 from pipeline.tracking import rrd_equal
 
 # The smoke pipeline, in order; later issues append their stages here.
-STAGES = ("generate", "report")
+STAGES = ("generate", "label", "report")
 
 
 def run_pipeline(root: Path, extra: list[str]) -> None:

@@ -124,3 +124,15 @@ def test_raster_samples_pixel_centres(client, axis):
         sampled = ((d / z - n_cam[2] - n_cam[0] * xn) / n_cam[1]) * SR300.fy + SR300.cy
         err = sampled - v
     assert np.abs(np.median(err[100:300, 100:300])) < 0.02
+
+
+@pytest.mark.parametrize("axis,angle", [((0, 0, 1), 90), ((1, 1, 0), 180), ((1, -2, 3), 180),
+                                        ((0, 1, 0), 179.9), ((2, 1, -1), 37)])
+def test_quat_from_matrix_including_half_turns(axis, angle):
+    from pipeline.camera.geometry import quat_from_matrix
+    a = np.asarray(axis, float) / np.linalg.norm(axis)
+    h = np.radians(angle) / 2
+    q_true = np.r_[a * np.sin(h), np.cos(h)]  # (x, y, z, w) by the axis-angle formula
+    R = pose_matrix(np.zeros(3), q_true)[:3, :3]
+    q = quat_from_matrix(R)
+    assert min(np.abs(q - q_true).max(), np.abs(q + q_true).max()) < 1e-9

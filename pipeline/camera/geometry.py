@@ -102,3 +102,28 @@ def pose_matrix(position: np.ndarray, quat_xyzw: np.ndarray) -> np.ndarray:
     T[:3, :3] = R
     T[:3, 3] = position
     return T
+
+
+def quat_from_matrix(R: np.ndarray) -> np.ndarray:
+    """(3, 3) rotation matrix → unit quaternion (x, y, z, w), Shepperd's method.
+
+    Divides by the largest of 4w², 4x², 4y², 4z², so it stays exact for half-turns (w = 0),
+    where shortcuts that take the signs of x, y, z from the skew part lose them.
+    """
+    R = np.asarray(R, dtype=np.float64)
+    t = R[0, 0] + R[1, 1] + R[2, 2]
+    k = int(np.argmax([t, R[0, 0], R[1, 1], R[2, 2]]))
+    if k == 0:
+        s = 2.0 * np.sqrt(1.0 + t)
+        q = [(R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s, s / 4]
+    elif k == 1:
+        s = 2.0 * np.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
+        q = [s / 4, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s, (R[2, 1] - R[1, 2]) / s]
+    elif k == 2:
+        s = 2.0 * np.sqrt(1.0 - R[0, 0] + R[1, 1] - R[2, 2])
+        q = [(R[0, 1] + R[1, 0]) / s, s / 4, (R[1, 2] + R[2, 1]) / s, (R[0, 2] - R[2, 0]) / s]
+    else:
+        s = 2.0 * np.sqrt(1.0 - R[0, 0] - R[1, 1] + R[2, 2])
+        q = [(R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, s / 4, (R[1, 0] - R[0, 1]) / s]
+    q = np.asarray(q)
+    return q / np.linalg.norm(q)

@@ -133,6 +133,63 @@ class GenerateConfig:
 
 
 @dataclass
+class HandConfig:
+    """The two-cup suction hand (paper Fig. 1b) and the hand-level fit criteria, metres."""
+
+    cup_diameter: float = 0.018
+    cup_offset: float = 0.035  # cup centre to camera centre along the hand's Y
+    standoff: float = 0.15  # d*: camera to surface along the normal at the target pose
+    margin: float = 0.002  # a cup disc grown by this must lie inside the visible surface
+    min_area_ratio: float = 1.2  # surface area >= ratio × the active cups' area
+    tie_tolerance: float = 0.001  # L/R camera heights closer than this: a tie (→ L)
+
+
+@dataclass
+class SurfaceConfig:
+    """Surface detection by RANSAC plane fits on per-object point clusters."""
+
+    distance_threshold: float = 0.002  # RANSAC inlier distance, m
+    ransac_n: int = 3
+    num_iterations: int = 200
+    min_inliers: int = 150  # fewer points: not a surface
+    max_surfaces_per_object: int = 3
+    truth_min_visible_px: int = 150  # ground-truth faces with fewer visible pixels are ignored
+    match_max_center_dist: float = 0.02  # m, detected ↔ true face matching
+    match_max_normal_deg: float = 20.0
+
+
+@dataclass
+class RobotSchema:
+    """The 7-DoF robot (``pipeline.robot.RobotConfig`` documents each field)."""
+
+    base_position: List[float] = field(default_factory=lambda: [-0.42, 0.0, 0.10])
+    base_yaw_deg: float = 0.0
+    pedestal_half_size_xy: float = 0.08
+    home_camera_height: float = 0.625
+    ik_max_iterations: int = 100
+    ik_residual_threshold: float = 1e-6
+    ik_joint_damping: float = 1e-3
+    ik_hand_damping: float = 0.1
+    ik_refinements: int = 4
+    ik_restarts: int = 8
+    ik_restart_noise_rad: float = 1.0
+    position_tolerance: float = 0.002
+    orientation_tolerance_deg: float = 1.0
+    collision_margin: float = 0.005
+    self_collision_margin: float = 0.0
+
+
+@dataclass
+class LabelConfig:
+    """The labelling stage."""
+
+    generate_version: str = "latest"
+    robot_checks: bool = True  # robot-level labels (IK, joint limits, collisions)
+    workers: int = 0  # 0 = all cores; does not change the artifact
+    force: bool = False
+
+
+@dataclass
 class ReportConfig:
     """The report stage: which artifacts to gather and how many sample images to draw."""
 
@@ -162,6 +219,10 @@ class PipelineConfig:
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
     sensor: SensorConfig = field(default_factory=SensorConfig)
     generate: GenerateConfig = field(default_factory=GenerateConfig)
+    hand: HandConfig = field(default_factory=HandConfig)
+    robot: RobotSchema = field(default_factory=RobotSchema)
+    surfaces: SurfaceConfig = field(default_factory=SurfaceConfig)
+    label: LabelConfig = field(default_factory=LabelConfig)
     report: ReportConfig = field(default_factory=ReportConfig)
     logging: LoggingConfig = field(default_factory=LoggingConfig)
 

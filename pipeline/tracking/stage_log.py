@@ -48,6 +48,8 @@ from foxglove import channels as fxc
 from foxglove import messages as fxm
 from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
+from pipeline.camera.geometry import quat_from_matrix
+
 __all__ = [
     "StageLog",
     "default_blueprint",
@@ -107,30 +109,11 @@ def _timestamp(clock_ns: int) -> fxm.Timestamp:
 
 
 def _quat_xyzw_from_matrix(R: np.ndarray) -> tuple[float, float, float, float]:
-    """Unit quaternion (x, y, z, w) with w >= 0 of a 3x3 rotation matrix (float64 arithmetic)."""
-    R = np.asarray(R, dtype=np.float64)
-    m00, m01, m02 = R[0]
-    m10, m11, m12 = R[1]
-    m20, m21, m22 = R[2]
-    tr = m00 + m11 + m22
-    if tr > 0.0:
-        s = 2.0 * np.sqrt(tr + 1.0)
-        w, x, y, z = 0.25 * s, (m21 - m12) / s, (m02 - m20) / s, (m10 - m01) / s
-    elif m00 > m11 and m00 > m22:
-        s = 2.0 * np.sqrt(1.0 + m00 - m11 - m22)
-        w, x, y, z = (m21 - m12) / s, 0.25 * s, (m01 + m10) / s, (m02 + m20) / s
-    elif m11 > m22:
-        s = 2.0 * np.sqrt(1.0 + m11 - m00 - m22)
-        w, x, y, z = (m02 - m20) / s, (m01 + m10) / s, 0.25 * s, (m12 + m21) / s
-    else:
-        s = 2.0 * np.sqrt(1.0 + m22 - m00 - m11)
-        w, x, y, z = (m10 - m01) / s, (m02 + m20) / s, (m12 + m21) / s, 0.25 * s
-    q = np.array([x, y, z, w])
-    q /= np.linalg.norm(q)
+    """Unit quaternion (x, y, z, w) with w >= 0 of a 3x3 rotation matrix."""
+    q = quat_from_matrix(R)
     if q[3] < 0:
         q = -q
     return float(q[0]), float(q[1]), float(q[2]), float(q[3])
-
 
 def _as_colors_u8(colors: np.ndarray, n: int) -> np.ndarray:
     """(N,3)/(N,4) uint8 or float in [0,1] -> (N,4) uint8 RGBA."""

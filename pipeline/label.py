@@ -1,0 +1,349 @@
+"""The labelling stage (paper Sec. 4.3, Figs. 4b–4f, 5, 6): grasp points and their classes.
+
+For every generated depth image:
+
+1. **Surfaces** (Fig. 4b–c): the point cloud is split into per-object clusters with the
+   simulator's instance mask (standing in for the paper's PCL box-filter crop), and every visible
+   planar face is found by repeated RANSAC plane fits (``pipeline.labelling.surfaces``). Each
+   surface gives a grasp point g = its centre in pixels, a normal, long/short axes and lengths.
+2. **Hand level** (Figs. 5, 6): B, L, R or NG from the surface alone
+   (``pipeline.labelling.hand``).
+3. **Robot level** (Fig. 4e): for B, L and R, the robot (``pipeline.robot``) must reach the
+   target camera pose (inverse kinematics checked by forward kinematics), within joint limits,
+   without the arm or hand touching the bin or other boxes; otherwise NG with the failed check.
+
+Detected surfaces are also matched against the true visible faces computed from the
+simulator's box poses; the accuracy goes into the manifest.
+
+Artifact (``data/label/<version>/``): ``labels/<split>-<shard>.npz`` aligned with the
+generation shards, one row per grasp point (see ``LABEL_FIELDS``), plus ``log.rrd``/``log.mcap``.
+
+    python -m pipeline.label experiment=smoke [label.generate_version=<version>] [label.robot_checks=false]
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import multiprocessing as mp
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import hydra
+import numpy as np
+from omegaconf import DictConfig, OmegaConf
+from tqdm import tqdm
+
+from pipeline.artifacts import compute_version, resolve_artifact, run_stage, stage_config
+from pipeline.artifacts.store import StageRun
+from pipeline.camera.geometry import quat_from_matrix
+from pipeline.cli import CONF_DIR, data_root, default_workers, stage_main
+from pipeline.dataset.scenes import SPLITS, Scene, SceneDataset
+from pipeline.dataset.storage import read_npz, write_npz
+from pipeline.labelling.hand import hand_label
+from pipeline.labelling.surfaces import (
+    SurfaceDetectionConfig, aggregate, detect_surfaces, match_surfaces, true_visible_faces,
+)
+from pipeline.labelling.types import GraspClass
+from pipeline.tracking import StageLog, default_blueprint
+
+STAGE = "label"
+SECTIONS = ("hand", "surfaces", "label", "robot")
+NOT_AFFECTING_RESULT = ("label.workers", "label.force", "label.generate_version")
+
+NG_REASONS = ("", "too_small", "ik", "joint_limits", "collision")
+CLASS_COLORS = {GraspClass.R: (230, 60, 60), GraspClass.L: (60, 200, 60),
+                GraspClass.B: (60, 120, 255), GraspClass.NG: (150, 150, 150)}
+
+# One row per grasp point in labels/<split>-<shard>.npz:
+LABEL_FIELDS = {
+    "scene_index": "(P,) int64 scene index within the split",
+    "instance": "(P,) int16 the box's value in the scene's instance mask",
+    "uv": "(P, 2) float32 grasp point g in pixels (u, v)",
+    "center_cam": "(P, 3) float32 surface centre, camera frame, m",
+    "normal_cam": "(P, 3) float32 unit normal towards the camera",
+    "long_axis_cam": "(P, 3) float32", "short_axis_cam": "(P, 3) float32",
+    "lengths": "(P, 2) float32 L_l, L_s in m", "area": "(P,) float32 m^2",
+    "x_axis_cam": "(P, 3) float32 the surface axis the hand's X is aligned with",
+    "theta_deg": "(P, 2) float32 θ1, θ2 (warped view), degrees",
+    "hand_class": "(P,) int8 hand-level class (0 R, 1 L, 2 B, 3 NG)",
+    "grasp_class": "(P,) int8 final class after the robot-level check",
+    "ng_reason": "(P,) int8 index into NG_REASONS ('' when graspable)",
+    "num_points": "(P,) int32 RANSAC inliers",
+    "points_per_scene": "(N,) int32 grasp points of each scene of the shard (rows are in order)",
+}
+
+
+@dataclass(frozen=True)
+class LabelTask:
+    split: str
+    gen_file: str  # generation shard (relative to the generation artifact)
+    first: int
+    count: int
+    out_path: str
+
+
+@dataclass
+class LabelSummary:
+    task: LabelTask
+    matches: list = field(default_factory=list)
+    hand_counts: np.ndarray = field(default_factory=lambda: np.zeros(4, np.int64))
+    final_counts: np.ndarray = field(default_factory=lambda: np.zeros(4, np.int64))
+    reasons: dict = field(default_factory=dict)
+    surface_s: float = 0.0
+    robot_s: float = 0.0
+
+
+_STATE: dict = {}
+
+
+def _init_worker(cfg_obj, gen_dir: str) -> None:
+    _STATE.clear()
+    _STATE["cfg"] = cfg_obj
+    _STATE["gen_dir"] = Path(gen_dir)
+    if cfg_obj.label.robot_checks:
+        from pipeline.labelling.robot_check import RobotChecker
+        _STATE["robot"] = RobotChecker(cfg_obj)
+
+
+def surface_config(cfg) -> SurfaceDetectionConfig:
+    s = cfg.surfaces
+    return SurfaceDetectionConfig(distance_threshold=s.distance_threshold, ransac_n=s.ransac_n,
+                                  num_iterations=s.num_iterations, min_inliers=s.min_inliers,
+                                  max_surfaces_per_object=s.max_surfaces_per_object)
+
+
+def label_scene(scene: Scene, cfg, robot=None) -> tuple[dict[str, np.ndarray], dict, float, float]:
+    """Grasp points of one scene: (rows, accuracy match record, surface seconds, robot seconds)."""
+    t0 = time.perf_counter()
+    surfaces = detect_surfaces(scene.depth_m, scene.mask, scene.intrinsics, surface_config(cfg))
+    truth = true_visible_faces(scene.depth_m, scene.mask, scene.intrinsics, scene.boxes,
+                               cfg.surfaces.truth_min_visible_px)
+    match = match_surfaces(surfaces, truth, cfg.surfaces.match_max_center_dist,
+                           cfg.surfaces.match_max_normal_deg)
+    t1 = time.perf_counter()
+    rows = []
+    if robot is not None and surfaces:
+        robot.set_scene(scene)
+    for s in surfaces:
+        hl = hand_label(s, cfg.hand)
+        final, reason = hl.grasp_class, hl.reason or ""
+        if robot is not None and final != GraspClass.NG:
+            reason = robot.check(s, hl, cfg.hand) or ""
+            if reason:
+                final = GraspClass.NG
+        rows.append((s, hl, final, reason))
+    t2 = time.perf_counter()
+
+    def arr(fn, dtype, shape=()):
+        return np.asarray([fn(r) for r in rows], dtype=dtype).reshape((len(rows), *shape))
+
+    out = {
+        "instance": arr(lambda r: r[0].instance, np.int16),
+        "uv": arr(lambda r: r[0].center_px, np.float32, (2,)),
+        "center_cam": arr(lambda r: r[0].center_cam, np.float32, (3,)),
+        "normal_cam": arr(lambda r: r[0].normal_cam, np.float32, (3,)),
+        "long_axis_cam": arr(lambda r: r[0].long_axis_cam, np.float32, (3,)),
+        "short_axis_cam": arr(lambda r: r[0].short_axis_cam, np.float32, (3,)),
+        "lengths": arr(lambda r: (r[0].long_length, r[0].short_length), np.float32, (2,)),
+        "area": arr(lambda r: r[0].area, np.float32),
+        "x_axis_cam": arr(lambda r: r[1].x_axis_cam, np.float32, (3,)),
+        "theta_deg": arr(lambda r: (r[1].theta1_deg, r[1].theta2_deg), np.float32, (2,)),
+        "hand_class": arr(lambda r: int(r[1].grasp_class), np.int8),
+        "grasp_class": arr(lambda r: int(r[2]), np.int8),
+        "ng_reason": arr(lambda r: NG_REASONS.index(r[3]), np.int8),
+        "num_points": arr(lambda r: r[0].num_points, np.int32),
+    }
+    return out, match, t1 - t0, t2 - t1
+
+
+def label_shard(task: LabelTask) -> LabelSummary:
+    cfg = _STATE["cfg"]
+    ds = SceneDataset(_STATE["gen_dir"], task.split)
+    summary = LabelSummary(task)
+    cols: dict[str, list] = {}
+    per_scene = []
+    for index in range(task.first, task.first + task.count):
+        scene = ds[index]
+        rows, match, ts, tr = label_scene(scene, cfg, _STATE.get("robot"))
+        summary.surface_s += ts
+        summary.robot_s += tr
+        summary.matches.append(match)
+        rows["scene_index"] = np.full(len(rows["instance"]), index, np.int64)
+        for k, v in rows.items():
+            cols.setdefault(k, []).append(v)
+        per_scene.append(len(rows["instance"]))
+        summary.hand_counts += np.bincount(rows["hand_class"], minlength=4)
+        summary.final_counts += np.bincount(rows["grasp_class"], minlength=4)
+        for code in rows["ng_reason"]:
+            if code:
+                name = NG_REASONS[code]
+                summary.reasons[name] = summary.reasons.get(name, 0) + 1
+    arrays = {k: np.concatenate(v) for k, v in cols.items()}
+    arrays["points_per_scene"] = np.asarray(per_scene, np.int32)
+    Path(task.out_path).parent.mkdir(parents=True, exist_ok=True)
+    write_npz(Path(task.out_path), arrays)
+    return summary
+
+
+def plan_tasks(gen_dir: Path, out_dir: Path) -> list[LabelTask]:
+    index = json.loads((gen_dir / "index.json").read_text())
+    tasks = []
+    for split in SPLITS:
+        for shard in index["splits"][split]:
+            name = Path(shard["file"]).name
+            tasks.append(LabelTask(split, shard["file"], shard["first"], shard["count"],
+                                   str(out_dir / "labels" / name)))
+    return tasks
+
+
+def run_tasks(tasks, cfg_obj, gen_dir: Path, workers: int, progress: bool):
+    total = sum(t.count for t in tasks)
+    bar = tqdm(total=total, unit="scene", desc=STAGE, disable=not progress, smoothing=0.1)
+    try:
+        if workers <= 1:
+            _init_worker(cfg_obj, str(gen_dir))
+            for task in tasks:
+                s = label_shard(task)
+                bar.update(task.count)
+                yield s
+            return
+        ctx = mp.get_context("fork")  # see pipeline.generate.run_shards
+        with ctx.Pool(workers, initializer=_init_worker, initargs=(cfg_obj, str(gen_dir))) as pool:
+            for s in pool.imap(label_shard, tasks, chunksize=1):
+                bar.update(s.task.count)
+                yield s
+    finally:
+        bar.close()
+
+
+class LabelSet:
+    """Read a label artifact back: ``LabelSet(folder, split)[i]`` → dict of the scene's rows."""
+
+    def __init__(self, folder: Path, split: str) -> None:
+        self.folder = Path(folder)
+        meta = json.loads((self.folder / "labels.json").read_text())
+        self.shards = meta["splits"][split]
+        self._starts = np.array([s["first"] for s in self.shards], dtype=np.int64)
+        self._len = int(sum(s["count"] for s in self.shards))
+        self._cache = None
+
+    def __len__(self) -> int:
+        return self._len
+
+    def __getitem__(self, i: int) -> dict[str, np.ndarray]:
+        if not 0 <= i < self._len:
+            raise IndexError(f"scene {i} out of range ({self._len} scenes)")
+        k = int(np.searchsorted(self._starts, i, side="right") - 1)
+        if self._cache is None or self._cache[0] != k:
+            arrays = read_npz(self.folder / self.shards[k]["file"])
+            starts = np.concatenate([[0], np.cumsum(arrays["points_per_scene"])])
+            self._cache = (k, arrays, starts)
+        _, arrays, starts = self._cache
+        row = i - int(self._starts[k])
+        a, b = int(starts[row]), int(starts[row + 1])
+        return {key: v[a:b] for key, v in arrays.items() if key != "points_per_scene"}
+
+
+def _log_scene(log: StageLog, scene: Scene, rows: dict, log_index: int) -> None:
+    log.set_time(sequences={"scene": log_index}, clock_ns=log_index * 1_000_000_000)
+    log.log_camera("world/camera", scene.intrinsics, scene.T_world_cam)
+    log.log_depth("world/camera/depth", scene.depth_m)
+    classes = [GraspClass(int(c)) for c in rows["grasp_class"]]
+    colors = np.array([CLASS_COLORS[c] for c in classes], np.uint8).reshape(-1, 3)
+    log.log_points("world/camera/grasp_points", rows["center_cam"].reshape(-1, 3), colors)
+    n = len(classes)
+    quats = np.array([_quat_from_axes(rows["long_axis_cam"][i], rows["short_axis_cam"][i],
+                                      rows["normal_cam"][i]) for i in range(n)]).reshape(-1, 4)
+    sizes = np.column_stack([rows["lengths"], np.full(n, 0.001)]).reshape(-1, 3)
+    log.log_boxes("world/camera/surfaces", rows["center_cam"].reshape(-1, 3), sizes, quats,
+                  labels=[c.name for c in classes], frame_id="camera")
+    counts = np.bincount(rows["grasp_class"], minlength=4)
+    log.log_text("log", f"{scene.split} scene {scene.index}: {n} grasp points; "
+                        + ", ".join(f"{c.name} {counts[c]}" for c in GraspClass))
+
+
+def _quat_from_axes(x, y, z) -> np.ndarray:
+    R = np.column_stack([x, y, z]).astype(np.float64)
+    u, _, vt = np.linalg.svd(R)
+    R = u @ vt
+    if np.linalg.det(R) < 0:
+        R[:, 2] *= -1
+    return quat_from_matrix(R)
+
+
+def label(cfg: DictConfig) -> Path:
+    """Run the labelling stage on a generation artifact; returns the label artifact folder."""
+    gen_dir = resolve_artifact(data_root(cfg), "generate", cfg.label.generate_version)
+    config = stage_config(cfg, [s for s in SECTIONS if s in cfg], NOT_AFFECTING_RESULT)
+    version = compute_version(STAGE, config, upstream={"generate": gen_dir.name})
+    cfg_obj = OmegaConf.to_object(cfg)
+    workers = default_workers(cfg_obj.label.workers)
+
+    def body(run: StageRun) -> None:
+        tasks = plan_tasks(gen_dir, run.work_dir)
+        meta = {"splits": {s: [] for s in SPLITS}, "fields": LABEL_FIELDS,
+                "classes": [c.name for c in GraspClass], "ng_reasons": list(NG_REASONS)}
+        for t in tasks:
+            meta["splits"][t.split].append({
+                "file": Path(t.out_path).relative_to(run.work_dir).as_posix(),
+                "first": t.first, "count": t.count})
+        (run.work_dir / "labels.json").write_text(json.dumps(meta, indent=2) + "\n")
+        t0 = time.perf_counter()
+        summaries = list(run_tasks(tasks, cfg_obj, gen_dir, workers, cfg_obj.logging.progress))
+        elapsed = time.perf_counter() - t0
+        n_scenes = sum(t.count for t in tasks)
+        run.timings.update({
+            "label_s": round(elapsed, 3), "workers": workers,
+            "scenes_per_s": round(n_scenes / max(elapsed, 1e-9), 3),
+            "surface_detection_s_per_scene": round(
+                sum(s.surface_s for s in summaries) / max(n_scenes, 1), 5),
+            "robot_checks_s_per_scene": round(
+                sum(s.robot_s for s in summaries) / max(n_scenes, 1), 5),
+        })
+        metrics: dict = {"splits": {}}
+        for split in SPLITS:
+            ss = [s for s in summaries if s.task.split == split]
+            hand = sum((s.hand_counts for s in ss), np.zeros(4, np.int64))
+            final = sum((s.final_counts for s in ss), np.zeros(4, np.int64))
+            reasons: dict = {}
+            for s in ss:
+                for k, v in s.reasons.items():
+                    reasons[k] = reasons.get(k, 0) + v
+            metrics["splits"][split] = {
+                "scenes": int(sum(s.task.count for s in ss)),
+                "grasp_points": int(final.sum()),
+                "hand_level_classes": {c.name: int(hand[c]) for c in GraspClass},
+                "classes": {c.name: int(final[c]) for c in GraspClass},
+                "ng_reasons": dict(sorted(reasons.items())),
+                "surface_accuracy": aggregate([m for s in ss for m in s.matches]),
+            }
+        metrics["surface_accuracy"] = aggregate([m for s in summaries for m in s.matches])
+        run.metrics.update(metrics)
+
+        sizes = {split: metrics["splits"][split]["scenes"] for split in SPLITS}
+        total = max(sum(sizes.values()), 1)
+        quota = {s: min(n, math.ceil(cfg_obj.logging.max_logged_scenes * n / total))
+                 for s, n in sizes.items()}
+        with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version,
+                      blueprint=default_blueprint()) as log:
+            log_index = 0
+            for split in SPLITS:
+                ds, labels = SceneDataset(gen_dir, split), LabelSet(run.work_dir, split)
+                for i in range(quota[split]):
+                    _log_scene(log, ds[i], labels[i], log_index)
+                    log_index += 1
+        run.metrics["logged_scenes"] = log_index
+
+    return run_stage(data_root(cfg), STAGE, version, config, {"generate": gen_dir.name}, body,
+                     seed=cfg_obj.seed, force=cfg_obj.label.force)
+
+
+@hydra.main(config_path=CONF_DIR, config_name="label", version_base="1.3")
+def main(cfg: DictConfig) -> None:
+    stage_main(label)(cfg)
+
+
+if __name__ == "__main__":
+    main()

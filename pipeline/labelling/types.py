@@ -1,0 +1,51 @@
+"""Data passed between surface detection, hand-level and robot-level labelling.
+
+Frames: camera (OpenCV: x right, y down, z forward; metres); pixel (u, v).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import IntEnum
+
+import numpy as np
+
+
+class GraspClass(IntEnum):
+    """The DCNN's four classes (paper Eq. 3). The order is the network's output order."""
+
+    R = 0  # right cup on
+    L = 1  # left cup on
+    B = 2  # both cups on
+    NG = 3  # not graspable
+
+
+@dataclass
+class Surface:
+    """One visible planar face of a box, as seen in one depth image.
+
+    Attributes:
+        instance: the box's value in the scene's instance mask (1-based).
+        center_cam: (3,) centre of the visible region of the face, in the face's plane, metres.
+        normal_cam: (3,) unit normal, pointing towards the camera (``normal_cam @ center_cam < 0``).
+        long_axis_cam: (3,) unit vector in the plane along the longer side of the visible region.
+        short_axis_cam: (3,) unit vector in the plane along the shorter side
+            (``short = normal × long``, a right-handed frame (long, short, normal)).
+        long_length: L_l, length of the visible region along ``long_axis_cam``, metres.
+        short_length: L_s, along ``short_axis_cam``, metres.
+        center_px: (2,) the centre projected to pixel coordinates (u, v): the grasp point g.
+        num_points: inlier points of the plane fit.
+        area: visible area in the plane, m².
+    """
+
+    instance: int
+    center_cam: np.ndarray
+    normal_cam: np.ndarray
+    long_axis_cam: np.ndarray
+    short_axis_cam: np.ndarray
+    long_length: float
+    short_length: float
+    center_px: np.ndarray
+    num_points: int
+    area: float
+    extra: dict = field(default_factory=dict)

@@ -1,0 +1,105 @@
+"""Hand-level labels (paper Figs. 5, 6) on surfaces worked out by hand."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.config.schema import HandConfig
+from pipeline.labelling.hand import (
+    camera_centre, hand_label, rotation_between,
+)
+from pipeline.robot.target_pose import target_camera_pose
+from pipeline.labelling.types import GraspClass, Surface
+
+CFG = HandConfig()  # cups: r = 9 mm, offset 35 mm, margin 2 mm, area ratio 1.2
+
+
+def surface(long_axis, normal, L_l, L_s, center=(0.0, 0.0, 0.6)):
+    n = np.asarray(normal, float) / np.linalg.norm(normal)
+    l = np.asarray(long_axis, float) / np.linalg.norm(long_axis)
+    s = np.cross(n, l)
+    return Surface(instance=1, center_cam=np.asarray(center, float), normal_cam=n,
+                   long_axis_cam=l, short_axis_cam=s, long_length=L_l, short_length=L_s,
+                   center_px=np.zeros(2), num_points=1000, area=L_l * L_s)
+
+
+def test_rotation_between():
+    for a, b in [((0, 0, 1), (0, 0.5, -0.866)), ((1, 0, 0), (0, 1, 0)), ((0, 0, 1), (0, 0, -1))]:
+        a, b = np.array(a, float), np.array(b, float) / np.linalg.norm(b)
+        R = rotation_between(a, b)
+        assert R @ a == pytest.approx(b, abs=1e-9)
+        assert R @ R.T == pytest.approx(np.eye(3), abs=1e-9)
+        assert np.linalg.det(R) == pytest.approx(1.0)
+
+
+def test_flat_face_long_along_x_takes_one_cup():
+    # 0.12 × 0.075 m top face, long side along image X: θ1 = 0°, θ2 = 90°, so X is aligned with
+    # the long side and the cups run across the 0.075 m side. Both cups need
+    # 0.035 + 0.009 + 0.002 = 0.046 m > 0.0375 m of half-width: no B. One cup needs
+    # 0.011 m ≤ 0.0375 m: fits. Level surface: O_cam heights tie → L.
+    lab = hand_label(surface([1, 0, 0], [0, 0, -1], 0.12, 0.075), CFG)
+    assert (lab.theta1_deg, lab.theta2_deg) == pytest.approx((0.0, 90.0))
+    assert lab.aligned == "long" and lab.grasp_class == GraspClass.L
+    assert lab.x_axis_cam == pytest.approx([1, 0, 0])
+
+
+def test_flat_face_long_along_y_takes_both_cups():
+    # The same face turned 90°: θ1 = 90°, θ2 = 0°, X aligned with the short side; the cups run
+    # along the 0.12 m side: 0.046 ≤ 0.06 and 0.011 ≤ 0.0375 → B.
+    lab = hand_label(surface([0, 1, 0], [0, 0, -1], 0.12, 0.075), CFG)
+    assert lab.aligned == "short" and lab.grasp_class == GraspClass.B
+    # Short axis = n × l = (0,0,−1) × (0,1,0) = (1, 0, 0): already along +X.
+    assert lab.x_axis_cam == pytest.approx([1, 0, 0])
+
+
+def test_axis_at_30_degrees():
+    # Long axis at 30° to X in a level face: θ1 = 30°, θ2 = 60° → align the long side.
+    a = np.radians(30)
+    lab = hand_label(surface([np.cos(a), np.sin(a), 0], [0, 0, -1], 0.145, 0.100), CFG)
+    assert (lab.theta1_deg, lab.theta2_deg) == pytest.approx((30.0, 60.0))
+    assert lab.aligned == "long"
+    # Half-width along Y: 0.046 ≤ 0.050 → B.
+    assert lab.grasp_class == GraspClass.B
+    # 0.088 m wide: 0.046 > 0.044 → one cup only.
+    narrow = hand_label(surface([np.cos(a), np.sin(a), 0], [0, 0, -1], 0.145, 0.088), CFG)
+    assert narrow.grasp_class == GraspClass.L
+
+
+def test_face_too_small_is_ng():
+    # 0.05 × 0.02 m: one cup needs 0.011 m of half-width, the face has 0.010 m → NG.
+    lab = hand_label(surface([1, 0, 0], [0, 0, -1], 0.05, 0.02), CFG)
+    assert lab.grasp_class == GraspClass.NG and lab.reason == "too_small"
+
+
+def test_area_ratio_rejects_a_face_barely_larger_than_a_cup():
+    # 0.023 × 0.0135 m: a cup fits geometrically? half-widths 0.0115, 0.00675 < 0.011 → no.
+    # 0.024 × 0.024: fits (0.012 ≥ 0.011); area 5.76e-4 ≥ 1.2 × 2.545e-4 = 3.05e-4 → L.
+    assert hand_label(surface([1, 0, 0], [0, 0, -1], 0.024, 0.024), CFG).grasp_class == GraspClass.L
+    strict = HandConfig(min_area_ratio=2.5)  # 2.5 × 2.545e-4 = 6.36e-4 > 5.76e-4 → NG
+    assert hand_label(surface([1, 0, 0], [0, 0, -1], 0.024, 0.024), strict).grasp_class == GraspClass.NG
+
+
+def test_tilted_face_picks_the_higher_camera():
+    # Face tilted 30° about camera X, facing up in the image: n = (0, −0.5, −0.866), centre at
+    # z = 0.55 m, long side along X, 0.06 m wide → one cup. Target Z = −n, X = (1, 0, 0),
+    # Y = Z × X = (0, 0.866, −0.5). O_B = c + 0.15 n = (0, −0.075, 0.42010).
+    # L: O_B + 0.035 Y = (0, −0.04469, 0.40260); R: O_B − 0.035 Y = (0, −0.10531, 0.43760).
+    # L's camera is higher (smaller z in the home camera frame) → L.
+    s = surface([1, 0, 0], [0, -0.5, -np.sqrt(3) / 2], 0.12, 0.06, center=(0, 0, 0.55))
+    assert camera_centre(s, np.array([1.0, 0, 0]), GraspClass.L, CFG) == \
+        pytest.approx([0, -0.044689, 0.402596], abs=1e-6)
+    assert camera_centre(s, np.array([1.0, 0, 0]), GraspClass.R, CFG) == \
+        pytest.approx([0, -0.105311, 0.437596], abs=1e-6)
+    assert hand_label(s, CFG).grasp_class == GraspClass.L
+    # Tilted the other way, R's camera is the higher one.
+    s2 = surface([1, 0, 0], [0, 0.5, -np.sqrt(3) / 2], 0.12, 0.06, center=(0, 0, 0.55))
+    assert hand_label(s2, CFG).grasp_class == GraspClass.R
+
+
+def test_target_axes_right_handed():
+    R = target_camera_pose(np.array([0, 0, 0.55]), np.array([0, -0.5, -np.sqrt(3) / 2]),
+                           np.array([1.0, 0, 0]), "B")[:3, :3]
+    assert R[:, 2] == pytest.approx([0, 0.5, np.sqrt(3) / 2])
+    assert R[:, 1] == pytest.approx([0, np.sqrt(3) / 2, -0.5])
+    assert np.linalg.det(R) == pytest.approx(1.0)
