@@ -7,7 +7,8 @@ For every generated depth image:
    planar face is found by repeated RANSAC plane fits (``pipeline.labelling.surfaces``). Each
    surface gives a grasp point g = its centre in pixels, a normal, long/short axes and lengths.
 2. **Hand level** (Figs. 5, 6): B, L, R or NG from the surface alone
-   (``pipeline.labelling.hand``).
+   (``pipeline.labelling.hand``); also NG ("center_occluded") when the centre of the visible
+   region falls on another box lying across the face (about 4 % of surfaces).
 3. **Robot level** (Fig. 4e): for B, L and R, the robot (``pipeline.robot``) must reach the
    target camera pose (inverse kinematics checked by forward kinematics), within joint limits,
    without the arm or hand touching the bin or other boxes; otherwise NG with the failed check.
@@ -23,6 +24,7 @@ generation shards, one row per grasp point (see ``LABEL_FIELDS``), plus ``log.rr
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import multiprocessing as mp
@@ -52,7 +54,7 @@ STAGE = "label"
 SECTIONS = ("hand", "surfaces", "label", "robot")
 NOT_AFFECTING_RESULT = ("label.workers", "label.force", "label.generate_version")
 
-NG_REASONS = ("", "too_small", "ik", "joint_limits", "collision")
+NG_REASONS = ("", "too_small", "center_occluded", "ik", "joint_limits", "collision")
 CLASS_COLORS = {GraspClass.R: (230, 60, 60), GraspClass.L: (60, 200, 60),
                 GraspClass.B: (60, 120, 255), GraspClass.NG: (150, 150, 150)}
 
@@ -126,8 +128,14 @@ def label_scene(scene: Scene, cfg, robot=None) -> tuple[dict[str, np.ndarray], d
     rows = []
     if robot is not None and surfaces:
         robot.set_scene(scene)
+    H, W = scene.mask.shape
     for s in surfaces:
         hl = hand_label(s, cfg.hand)
+        u, v = np.clip(np.round(s.center_px).astype(int), 0, [W - 1, H - 1])
+        if hl.grasp_class != GraspClass.NG and scene.mask[v, u] != s.instance:
+            # The centre of the visible region falls on another box (a box lying across this
+            # face): a cup placed there would not touch this surface.
+            hl = dataclasses.replace(hl, grasp_class=GraspClass.NG, reason="center_occluded")
         final, reason = hl.grasp_class, hl.reason or ""
         if robot is not None and final != GraspClass.NG:
             reason = robot.check(s, hl, cfg.hand) or ""

@@ -1,0 +1,101 @@
+"""The labelling stage end to end on a tiny generated dataset."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.artifacts import load_manifest, verify_artifact
+from pipeline.cli import compose
+from pipeline.dataset import SceneDataset
+from pipeline.generate import generate
+from pipeline.label import NG_REASONS, LabelSet, label
+from pipeline.labelling.types import GraspClass
+from pipeline.tracking import mcap_message_counts, rrd_entity_paths
+
+TINY = ("generate.num_scenes=3", "generate.num_val_scenes=1", "generate.num_test_scenes=1",
+        "generate.scenes_per_shard=2", "generate.workers=1")
+
+
+def _cfg(stage, root, *extra):
+    return compose(stage, ["experiment=smoke", f"paths.root={root}", "logging.progress=false",
+                           *TINY, *extra])
+
+
+@pytest.fixture(scope="module")
+def labelled(tmp_path_factory):
+    root = tmp_path_factory.mktemp("label")
+    gen = generate(_cfg("generate", root))
+    folder = label(_cfg("label", root, "label.workers=1"))
+    return root, gen, folder
+
+
+def test_label_artifact(labelled):
+    root, gen, folder = labelled
+    manifest = load_manifest(folder)
+    assert manifest["upstream"] == {"generate": gen.name}
+    assert verify_artifact(folder) == []
+    total = 0
+    for split in ("train", "val", "test"):
+        ds, labels = SceneDataset(gen, split), LabelSet(folder, split)
+        assert len(labels) == len(ds)
+        split_counts = np.zeros(4, int)
+        for i in range(len(ds)):
+            scene, rows = ds[i], labels[i]
+            n = len(rows["instance"])
+            total += n
+            split_counts += np.bincount(rows["grasp_class"], minlength=4)
+            assert (rows["scene_index"] == i).all()
+            # Every grasp point lies on its own box in the instance mask.
+            u, v = np.round(rows["uv"]).astype(int).T
+            assert ((0 <= u) & (u < 416) & (0 <= v) & (v < 416)).all()
+            # Graspable points lie on their own box in the instance mask; the others are NG.
+            on_box = scene.mask[v, u] == rows["instance"]
+            off = ~on_box & (rows["hand_class"] != GraspClass.NG)
+            assert not off.any()
+            # NG exactly when a reason is recorded; hand-level NG is "too_small" or
+            # "center_occluded".
+            assert ((rows["grasp_class"] == GraspClass.NG) == (rows["ng_reason"] > 0)).all()
+            hand_ng = rows["hand_class"] == GraspClass.NG
+            assert np.isin(rows["ng_reason"][hand_ng],
+                           [NG_REASONS.index("too_small"), NG_REASONS.index("center_occluded")]).all()
+            # The robot check only ever turns a hand-level class into NG.
+            kept = rows["grasp_class"] != GraspClass.NG
+            assert (rows["grasp_class"][kept] == rows["hand_class"][kept]).all()
+            # Normals face the camera and are unit length.
+            assert (np.einsum("ij,ij->i", rows["normal_cam"], rows["center_cam"]) < 0).all()
+            assert np.allclose(np.linalg.norm(rows["normal_cam"], axis=1), 1, atol=1e-5)
+        metrics = manifest["metrics"]["splits"][split]
+        assert [metrics["classes"][c.name] for c in GraspClass] == split_counts.tolist()
+    assert total > 20
+    acc = manifest["metrics"]["surface_accuracy"]
+    assert acc["recall"] >= 0.95 and acc["precision"] >= 0.95
+    assert acc["center_err_px_median"] < 3.0 and acc["normal_err_deg_median"] < 3.0
+
+
+def test_label_logs(labelled):
+    _, _, folder = labelled
+    entities = rrd_entity_paths(folder / "log.rrd")
+    assert {"/world/camera/depth", "/world/camera/grasp_points",
+            "/world/camera/surfaces"} <= entities
+    counts = mcap_message_counts(folder / "log.mcap")
+    assert counts["/world/camera/depth"] == 5 and counts["/world/camera/grasp_points"] == 5
+
+
+def test_label_same_whatever_the_workers(labelled, tmp_path):
+    root, _, folder = labelled
+    other = label(_cfg("label", root, "label.workers=2", "label.force=true"))
+    assert other == folder
+    a = load_manifest(folder)["files"]
+    assert verify_artifact(other) == []
+    # Same version, recomputed with two workers: every label file identical.
+    b = load_manifest(other)["files"]
+    assert {k: v for k, v in a.items() if k != "log.rrd"} == \
+        {k: v for k, v in b.items() if k != "log.rrd"}
+
+
+def test_without_robot_checks_hand_classes_stand(labelled):
+    root, _, _ = labelled
+    folder = label(_cfg("label", root, "label.workers=1", "label.robot_checks=false"))
+    rows = LabelSet(folder, "train")[0]
+    assert (rows["grasp_class"] == rows["hand_class"]).all()
