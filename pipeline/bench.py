@@ -2,7 +2,9 @@
 
 Generation throughput with 1 and 2 worker processes, the render time per frame, and the ratio
 of the stage's per-process rate to a bare pybullet loop doing the same work (same cell, same
-trickle drop and rest test, same TinyRenderer frame) measured in the same run.
+trickle drop and rest test, same TinyRenderer frame) measured in the same run. Labelling
+throughput with 1 and 2 workers on the generated scenes, and its split between surface
+detection and robot checks.
 
     python -m pipeline.bench [--scenes 60] [--render-frames 30]
 """
@@ -120,21 +122,33 @@ def render_time_ms(frames: int, cfg) -> float:
 BENCH_SEED = 12345
 
 
-def stage_rate(num_scenes: int, workers: int) -> float:
-    """Scenes per second of ``pipeline.generate`` itself (simulation + storage), from its manifest."""
+def stage_rates(num_scenes: int, root: str) -> dict[str, float]:
+    """Scenes per second of ``pipeline.generate`` and ``pipeline.label`` with 1 and 2 workers
+    (simulation + storage; labelling = surfaces + hand + robot checks), from their manifests."""
     from pipeline.artifacts.store import load_manifest
-    from pipeline.generate import generate
     from pipeline.cli import compose
+    from pipeline.generate import generate
+    from pipeline.label import label
 
-    with tempfile.TemporaryDirectory() as root:
-        cfg = compose("generate", [
-            "experiment=smoke", f"paths.root={root}", f"generate.num_scenes={num_scenes}",
+    def cfg(stage: str, workers: int, sub: str):
+        return compose(stage, [
+            "experiment=smoke", f"paths.root={root}/{sub}", f"generate.num_scenes={num_scenes}",
             "generate.num_val_scenes=0", "generate.num_test_scenes=0",
             "generate.scenes_per_shard=10", f"generate.workers={workers}",
-            "logging.max_logged_scenes=0", "logging.progress=false", f"seed={BENCH_SEED}",
+            f"label.workers={workers}", "logging.max_logged_scenes=0", "logging.progress=false",
+            f"seed={BENCH_SEED}",
         ])
-        folder = generate(cfg)
-        return float(load_manifest(folder)["timings"]["scenes_per_s"])
+
+    out = {}
+    for workers in (1, 2):
+        gen = load_manifest(generate(cfg("generate", workers, f"w{workers}")))
+        out[f"generate_{workers}w_scenes_per_s"] = gen["timings"]["scenes_per_s"]
+        lab = load_manifest(label(cfg("label", workers, f"w{workers}")))
+        out[f"label_{workers}w_scenes_per_s"] = lab["timings"]["scenes_per_s"]
+        if workers == 1:
+            out["label_surfaces_ms_per_scene"] = 1000 * lab["timings"]["surface_detection_s_per_scene"]
+            out["label_robot_ms_per_scene"] = 1000 * lab["timings"]["robot_checks_s_per_scene"]
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -154,16 +168,26 @@ def main(argv: list[str] | None = None) -> int:
     print(f"render, 416x416 depth + mask, 20 boxes: {results['render_ms_per_frame']:.1f} ms/frame")
     results["bare_loop_scenes_per_s"] = bare_loop(args.scenes, cfg, BENCH_SEED)
     print(f"bare pybullet loop, 1 process:          {results['bare_loop_scenes_per_s']:.2f} scenes/s")
+    with tempfile.TemporaryDirectory() as root:
+        results.update(stage_rates(args.scenes, root))
     for workers in (1, 2):
-        rate = stage_rate(args.scenes, workers)
-        results[f"generate_{workers}w_scenes_per_s"] = rate
-        print(f"generation stage, {workers} worker(s):        {rate:.2f} scenes/s")
+        print(f"generation stage, {workers} worker(s):        "
+              f"{results[f'generate_{workers}w_scenes_per_s']:.2f} scenes/s")
     one, two = results["generate_1w_scenes_per_s"], results["generate_2w_scenes_per_s"]
     results["stage_vs_bare_per_process"] = one / results["bare_loop_scenes_per_s"]
     results["speedup_2w"] = two / one
     print(f"stage / bare loop, per process:         {results['stage_vs_bare_per_process']:.2f} "
           "(target >= 0.90)")
     print(f"speed-up with 2 workers:                {results['speedup_2w']:.2f}x (target >= 1.6x)")
+    for workers in (1, 2):
+        print(f"labelling stage, {workers} worker(s):         "
+              f"{results[f'label_{workers}w_scenes_per_s']:.2f} scenes/s")
+    print(f"labelling per scene, 1 process:         "
+          f"{results['label_surfaces_ms_per_scene']:.1f} ms surfaces + "
+          f"{results['label_robot_ms_per_scene']:.1f} ms robot checks")
+    results["label_vs_generate_1w"] = results["label_1w_scenes_per_s"] / one
+    print(f"labelling / generation, per process:    {results['label_vs_generate_1w']:.2f} "
+          "(target >= 1: labelling is not the bottleneck)")
     print(json.dumps({k: round(v, 3) for k, v in results.items()}))
     return 0
 

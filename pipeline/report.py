@@ -1,16 +1,27 @@
 """The report stage: gather the latest artifacts into ``reports/`` (tables, figures, README).
 
 ``report(cfg)`` is a pure function of the config and its upstream artifacts. For now it reports
-the generated dataset (the paper's Tables 1–3 follow once the training, baseline and evaluation
-stages exist). It writes the versioned artifact ``data/report/<version>/``::
+the generated dataset and, when a label artifact exists, its grasp-point labels (the paper's
+Tables 1–3 follow once the training, baseline and evaluation stages exist). It writes the
+versioned artifact ``data/report/<version>/``::
 
     manifest.json                 what produced it (see pipeline.artifacts)
     README.md                     the report (Markdown; links are relative to this folder)
     tables/dataset_splits.csv     per split: scenes, boxes, removed boxes, settle steps
     tables/box_types.csv          per box type: boxes, mean visible area in the mask
+    tables/label_classes.csv      per split and level (hand / robot): grasp points per class
+    tables/label_ng_reasons.csv   per NG reason: grasp points per split
+    tables/surface_accuracy.csv   per split: detected surfaces vs. the simulator's true faces
     figures/sample_depth.png      ``report.num_sample_images`` test depth images + instance masks
     figures/boxes_per_scene.png   histogram of boxes per scene, all splits
+    figures/labels_sample.png     test depth images with their grasp points coloured by class
     log.rrd, log.mcap             Rerun and MCAP logs of the tables (one text entry each)
+
+The three ``label_*``/``surface_*`` tables and ``labels_sample.png`` exist only when there is a
+label artifact (``report.label_version``, default the latest one); without one the README says
+that labelling has not run. A label artifact made from another generation artifact than
+``report.generate_version`` is an error. The labelling throughput (scenes/s) is run-dependent,
+so it stays in the label manifest's ``timings`` and is not copied here.
 
 and then publishes README.md, figures/ and tables/ into ``paths.reports`` (``<root>/reports/``),
 replacing those files one by one and leaving other files there alone.
@@ -18,18 +29,19 @@ replacing those files one by one and leaving other files there alone.
 Every file in the artifact is a function of the version key alone (no wall-clock times, no
 absolute paths; PNGs are written without the "Software" metadata), so two runs into different
 roots give byte-identical files (``log.rrd`` aside, see ``pipeline.tracking``).
+The figures are drawn by ``pipeline.report_figures``.
 
 Command line::
 
     python -m pipeline.report experiment=smoke
     python -m pipeline.report experiment=smoke report.generate_version=<version> report.force=true
+    python -m pipeline.report experiment=smoke report.generate_version=<g> report.label_version=<l>
 """
 
 from __future__ import annotations
 
 import csv
 import io
-import math
 import os
 import shutil
 import uuid
@@ -38,36 +50,40 @@ from pathlib import Path
 from typing import Any
 
 import hydra
-import matplotlib
+import numpy as np
+from omegaconf import DictConfig
 
-matplotlib.use("Agg")
-
-import numpy as np  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
-from matplotlib.ticker import MaxNLocator  # noqa: E402
-from omegaconf import DictConfig  # noqa: E402
-
-from pipeline.artifacts import (  # noqa: E402
+from pipeline.artifacts import (
     ArtifactError,
+    available_versions,
     compute_version,
     load_manifest,
     resolve_artifact,
     run_stage,
     stage_config,
 )
-from pipeline.artifacts.store import StageRun  # noqa: E402
-from pipeline.cli import CONF_DIR, data_root, stage_main  # noqa: E402
-from pipeline.dataset.scenes import SPLITS, SceneDataset  # noqa: E402
-from pipeline.tracking import StageLog  # noqa: E402
+from pipeline.artifacts.store import StageRun
+from pipeline.cli import CONF_DIR, data_root, stage_main
+from pipeline.dataset.scenes import SPLITS, SceneDataset
+from pipeline.label import NG_REASONS, LabelSet
+from pipeline.labelling.types import GraspClass
+from pipeline.report_figures import (  # noqa: F401 (FIG_DPI, PNG_METADATA, _outline: API)
+    CLASS_MEANING,
+    FIG_DPI,
+    PNG_METADATA,
+    _outline,
+    figure_boxes_per_scene,
+    figure_labels_sample,
+    figure_sample_depth,
+)
+from pipeline.tracking import StageLog
 
 STAGE = "report"
 SECTIONS = ("report",)
-NOT_AFFECTING_RESULT = ("report.force", "report.generate_version")  # upstream version covers it
+# The upstream versions cover which artifacts are read.
+NOT_AFFECTING_RESULT = ("report.force", "report.generate_version", "report.label_version")
 
 PUBLISHED = ("README.md", "figures", "tables")
-FIG_DPI = 100
-# PNG text chunks: matplotlib writes "Software: matplotlib version ..." unless told not to.
-PNG_METADATA = {"Software": None}
 NONE = "—"  # shown in Markdown where a value does not exist (e.g. an empty split)
 
 
@@ -80,26 +96,30 @@ class Table:
     headers: list[str]
     rows: list[list[Any]]  # None = no value (empty split, no boxes of a type)
     formats: list[str] = field(default_factory=list)  # per column, e.g. "{:.2f}"; "" = str()
+    csv_formats: list[str] | None = None  # the CSV's, when not ``formats`` ("" = full precision)
+    text_columns: int = 1  # leading columns aligned left in Markdown
 
-    def _cell(self, value: Any, col: int, missing: str) -> str:
+    def _cell(self, value: Any, col: int, missing: str, formats: list[str]) -> str:
         if value is None:
             return missing
-        fmt = self.formats[col] if col < len(self.formats) else ""
+        fmt = formats[col] if col < len(formats) else ""
         return fmt.format(value) if fmt else str(value)
 
     def csv_text(self) -> str:
+        formats = self.formats if self.csv_formats is None else self.csv_formats
         buf = io.StringIO()
         w = csv.writer(buf, lineterminator="\n")
         w.writerow(self.headers)
         for row in self.rows:
-            w.writerow([self._cell(v, i, "") for i, v in enumerate(row)])
+            w.writerow([self._cell(v, i, "", formats) for i, v in enumerate(row)])
         return buf.getvalue()
 
     def markdown(self) -> str:
-        lines = ["| " + " | ".join(self.headers) + " |",
-                 "|" + "|".join("---" if i == 0 else "---:" for i in range(len(self.headers))) + "|"]
+        align = ["---" if i < self.text_columns else "---:" for i in range(len(self.headers))]
+        lines = ["| " + " | ".join(self.headers) + " |", "|" + "|".join(align) + "|"]
         for row in self.rows:
-            lines.append("| " + " | ".join(self._cell(v, i, NONE) for i, v in enumerate(row)) + " |")
+            lines.append("| " + " | ".join(self._cell(v, i, NONE, self.formats)
+                                           for i, v in enumerate(row)) + " |")
         return "\n".join(lines) + "\n"
 
 
@@ -224,115 +244,232 @@ def box_types_table(stats: DatasetStats) -> Table:
     return Table("box_types", headers, rows, ["", "", "", "{:.1f}", "{:.1f}"])
 
 
-# ---------------------------------------------------------------------- figures
-def _save(fig: Figure, path: Path) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=FIG_DPI, format="png", metadata=PNG_METADATA)
+# ---------------------------------------------------------------------- labels
+LABEL_SECTION = "Labels (paper Sec. 4.3, Figs. 4–6)"
+LABEL_NOT_RUN = "Labelling: not run yet (`make label`)."
+# Where each NG reason is decided (pipeline.label): the hand level looks at the surface alone,
+# the robot level at the whole robot in the scene.
+NG_REASON_LEVEL = {"too_small": "hand", "center_occluded": "hand", "ik": "robot",
+                   "joint_limits": "robot", "collision": "robot"}
+NG_REASON_MEANING = {
+    "too_small": "the cups do not fit on the visible surface",
+    "center_occluded": "the centre of the visible region lies on another box",
+    "ik": "inverse kinematics does not reach the target camera pose",
+    "joint_limits": "it is reached only outside the joint limits",
+    "collision": "it is reached only with the arm or hand touching the bin or another box",
+}
+# (manifest key, column header, Markdown format) of the surface-accuracy table.
+ACCURACY_COLUMNS = (
+    ("images", "images", ""), ("found", "found", ""), ("missed", "missed", ""),
+    ("spurious", "spurious", ""), ("precision", "precision", "{:.3f}"),
+    ("recall", "recall", "{:.3f}"),
+    ("center_err_px_median", "centre error median (px)", "{:.3f}"),
+    ("center_err_px_p90", "centre error p90 (px)", "{:.3f}"),
+    ("center_err_mm_median", "centre error median (mm)", "{:.3f}"),
+    ("center_err_mm_p90", "centre error p90 (mm)", "{:.3f}"),
+    ("normal_err_deg_median", "normal error median (deg)", "{:.3f}"),
+    ("normal_err_deg_p90", "normal error p90 (deg)", "{:.3f}"),
+)
 
 
-def _outline(mask: np.ndarray) -> np.ndarray:
-    """Box pixels next to a pixel of another mask value (a one-pixel outline inside each box)."""
-    m = mask.astype(np.int32)
-    edge = np.zeros(m.shape, dtype=bool)
-    dx = m[:, 1:] != m[:, :-1]
-    dy = m[1:, :] != m[:-1, :]
-    edge[:, 1:] |= dx
-    edge[:, :-1] |= dx
-    edge[1:, :] |= dy
-    edge[:-1, :] |= dy
-    return edge & (m > 0)
+@dataclass
+class LabelInfo:
+    """The label artifact the report reads: its folder, manifest and per-split metrics."""
+
+    folder: Path
+    manifest: dict
+    splits: dict[str, dict]  # manifest metrics.splits.<split>
+    accuracy: dict  # manifest metrics.surface_accuracy (all splits)
+
+    @property
+    def version(self) -> str:
+        return self.folder.name
 
 
-def _mask_rgb(mask: np.ndarray) -> np.ndarray:
-    """Instance mask as RGB: background black, instances from a fixed 20-colour palette."""
-    from matplotlib import colormaps
+def resolve_labels(root: Path, version: str, gen_version: str) -> LabelInfo | None:
+    """The label artifact to report, or None when ``version`` is "latest" and none exists.
 
-    palette = colormaps["tab20"](np.arange(20))[:, :3]
-    lut = np.zeros((256, 3))
-    lut[1:] = palette[(np.arange(255)) % 20]
-    return lut[mask]
-
-
-def sample_split(gen_dir: Path) -> str | None:
-    """The split the sample figure draws from: test, else train, else val (None = no scenes)."""
-    for split in ("test", "train", "val"):
-        if len(SceneDataset(gen_dir, split)):
-            return split
-    return None
-
-
-def figure_sample_depth(gen_dir: Path, num: int, path: Path) -> tuple[str | None, int]:
-    """Grid of (depth with mask outlines | instance mask) pairs; returns (split, images drawn)."""
-    split = sample_split(gen_dir)
-    ds = SceneDataset(gen_dir, split) if split else None
-    n = min(num, len(ds)) if ds is not None else 0
-    if n == 0:
-        fig = Figure(figsize=(6.0, 2.0), dpi=FIG_DPI)
-        fig.text(0.5, 0.5, "no scenes in the generation artifact", ha="center", va="center")
-        _save(fig, path)
-        return split, 0
-    scenes = [ds[i] for i in range(n)]
-    valid = np.concatenate([s.depth_m[s.depth_m > 0] for s in scenes])
-    vmin, vmax = (float(valid.min()), float(valid.max())) if valid.size else (0.0, 1.0)
-    if vmax <= vmin:
-        vmax = vmin + 1e-3
-    pairs_per_row = min(3, n)
-    rows = math.ceil(n / pairs_per_row)
-    fig = Figure(figsize=(4.4 * pairs_per_row + 1.2, 2.4 * rows + 0.5), dpi=FIG_DPI,
-                 layout="constrained")
-    axes = fig.subplots(rows, 2 * pairs_per_row, squeeze=False)
-    cmap = matplotlib.colormaps["viridis"].with_extremes(bad="0.75")
-    im = None
-    for ax in axes.ravel():
-        ax.set_axis_off()
-    for i, scene in enumerate(scenes):
-        r, c = divmod(i, pairs_per_row)
-        ax_d, ax_m = axes[r, 2 * c], axes[r, 2 * c + 1]
-        depth = np.where(scene.depth_m > 0, scene.depth_m, np.nan)
-        im = ax_d.imshow(depth, cmap=cmap, vmin=vmin, vmax=vmax, interpolation="nearest")
-        edge = _outline(scene.mask)
-        overlay = np.zeros(edge.shape + (4,))
-        overlay[edge] = (1.0, 1.0, 1.0, 0.9)
-        ax_d.imshow(overlay, interpolation="nearest")
-        ax_d.set_title(f"{split} #{scene.index}: {len(scene.boxes)} boxes", fontsize=8)
-        ax_m.imshow(_mask_rgb(scene.mask), interpolation="nearest")
-        ax_m.set_title("instance mask", fontsize=8)
-    cb = fig.colorbar(im, ax=axes.ravel().tolist(), shrink=0.9)
-    cb.set_label("depth (m)")
-    fig.suptitle(f"Sample depth images ({split} split; grey = no data, white = box outlines)",
-                 fontsize=9)
-    _save(fig, path)
-    return split, n
+    Raises ``ArtifactError`` when a named version does not exist, when the artifact was made from
+    another generation artifact than ``gen_version``, or when its manifest lacks the metrics.
+    """
+    try:
+        folder = resolve_artifact(root, "label", version)
+    except ArtifactError:
+        if version == "latest" and not available_versions(root, "label"):
+            return None
+        raise
+    manifest = load_manifest(folder)
+    label_gen = (manifest.get("upstream") or {}).get("generate")
+    if label_gen != gen_version:
+        raise ArtifactError(
+            f"label artifact {folder.name} was made from generation artifact {label_gen}, but the "
+            f"report reads generation artifact {gen_version}: pass matching versions "
+            f"(report.generate_version={label_gen} report.label_version={folder.name}), or rerun "
+            f"`make label` (label.generate_version={gen_version}) and then the report.")
+    keys = ("scenes", "grasp_points", "classes", "hand_level_classes", "ng_reasons",
+            "surface_accuracy")
+    try:
+        metrics = manifest["metrics"]
+        splits = {s: metrics["splits"][s] for s in SPLITS}
+        accuracy = metrics["surface_accuracy"]
+        complete = all(key in m for m in splits.values() for key in keys)
+    except (KeyError, TypeError):
+        complete = False
+    if not complete:
+        raise ArtifactError(
+            f"{folder.name}/manifest.json (label) lacks metrics.splits.<split>.classes / "
+            "hand_level_classes / ng_reasons / surface_accuracy or metrics.surface_accuracy: the "
+            "label artifact predates the report's label section; recompute it with `make label` "
+            "(label.force=true).")
+    return LabelInfo(folder, manifest, splits, accuracy)
 
 
-def figure_boxes_per_scene(splits: dict[str, dict], max_count: int, path: Path) -> None:
-    """Stacked histogram of boxes per scene, from the manifest's per-split histograms."""
-    fig = Figure(figsize=(6.4, 3.6), dpi=FIG_DPI, layout="constrained")
-    ax = fig.subplots()
-    x = np.arange(max_count + 1)
-    bottom = np.zeros(max_count + 1)
-    drawn = False
-    for split, colour in zip(SPLITS, ("tab:blue", "tab:orange", "tab:green")):
-        hist = splits[split].get("boxes_per_scene_histogram")
-        if not hist:
-            continue
-        h = np.zeros(max_count + 1)
-        h[:min(len(hist), max_count + 1)] = hist[:max_count + 1]
-        ax.bar(x, h, bottom=bottom, color=colour, label=f"{split} ({splits[split]['scenes']})",
-               width=0.85)
-        bottom += h
-        drawn = True
-    ax.set_xlabel("boxes at rest in the bin per scene")
-    ax.set_ylabel("scenes")
-    ax.yaxis.set_major_locator(MaxNLocator(integer=True))
-    ax.set_xticks(x[::2] if max_count > 10 else x)
-    ax.set_xlim(-0.6, max_count + 0.6)
-    if drawn:
-        ax.legend(title="split (scenes)", fontsize=8)
-    else:
-        ax.text(0.5, 0.5, "no scenes", transform=ax.transAxes, ha="center")
-    ax.set_title("Boxes per scene (all splits, stacked)", fontsize=10)
-    _save(fig, path)
+def check_labels(labels: LabelInfo, stats: DatasetStats) -> None:
+    """The label files must hold one entry per generated scene and the manifest's class counts."""
+    problems = []
+    try:
+        for s in SPLITS:
+            ls = LabelSet(labels.folder, s)
+            if len(ls) != stats.scenes[s]:
+                problems.append(f"{s}: {len(ls)} labelled scenes, {stats.scenes[s]} generated")
+                continue
+            counts = np.zeros(len(GraspClass), dtype=np.int64)
+            for i in range(len(ls)):
+                counts += np.bincount(ls[i]["grasp_class"], minlength=len(GraspClass))
+            expected = [int(labels.splits[s]["classes"].get(c.name, 0)) for c in GraspClass]
+            if counts.tolist() != expected:
+                problems.append(f"{s}: label files hold classes {counts.tolist()} (R, L, B, NG), "
+                                f"the manifest says {expected}")
+    except (OSError, KeyError, ValueError) as e:
+        problems.append(f"unreadable label files ({type(e).__name__}: {e})")
+    if problems:
+        raise ArtifactError(f"label artifact {labels.version} is inconsistent ("
+                            + "; ".join(problems) + "); run `make verify`, then recompute it.")
+
+
+def _pct(n: int, total: int) -> float | None:
+    """Percentage, unrounded (the tables round it once, when formatting)."""
+    return 100.0 * n / total if total else None
+
+
+def label_classes_table(labels: LabelInfo) -> Table:
+    """Per split (and all) and level: grasp points of each class, with percentages."""
+    headers = ["split", "level", "scenes", "grasp points", "grasp points per scene"]
+    for c in GraspClass:
+        headers += [c.name, f"{c.name} (%)"]
+    rows = []
+    totals = {"hand_level_classes": np.zeros(len(GraspClass), np.int64),
+              "classes": np.zeros(len(GraspClass), np.int64)}
+    n_scenes = 0
+    for split in [*SPLITS, "all"]:
+        if split != "all":
+            n_scenes += int(labels.splits[split]["scenes"])
+        scenes = n_scenes if split == "all" else int(labels.splits[split]["scenes"])
+        for key, level in (("hand_level_classes", "hand"), ("classes", "robot")):
+            if split == "all":
+                counts = totals[key]
+            else:
+                counts = np.array([int(labels.splits[split][key].get(c.name, 0))
+                                   for c in GraspClass], np.int64)
+                totals[key] += counts
+            total = int(counts.sum())
+            row = [split, level, scenes, total, total / scenes if scenes else None]
+            for c in GraspClass:
+                row += [int(counts[c]), _pct(int(counts[c]), total)]
+            rows.append(row)
+    formats = ["", "", "", "", "{:.1f}"] + ["", "{:.1f}"] * len(GraspClass)
+    csv_formats = ["", "", "", "", "{:.3f}"] + ["", "{:.2f}"] * len(GraspClass)
+    return Table("label_classes", headers, rows, formats, csv_formats, text_columns=2)
+
+
+def label_ng_reasons_table(labels: LabelInfo) -> Table:
+    """Per NG reason: grasp points of each split, all splits, share of all NG points."""
+    names = [r for r in NG_REASONS if r]
+    names += sorted({r for m in labels.splits.values() for r in m["ng_reasons"]} - set(names))
+    headers = ["NG reason", "level", *SPLITS, "all", "share of NG (%)"]
+    per = {r: [int(labels.splits[s]["ng_reasons"].get(r, 0)) for s in SPLITS] for r in names}
+    ng_total = sum(sum(v) for v in per.values())
+    rows = [[r, NG_REASON_LEVEL.get(r, NONE), *per[r], sum(per[r]), _pct(sum(per[r]), ng_total)]
+            for r in names]
+    split_totals = [sum(per[r][k] for r in names) for k in range(len(SPLITS))]
+    rows.append(["total", "", *split_totals, ng_total, 100.0 if ng_total else None])
+    formats = [""] * (len(headers) - 1) + ["{:.1f}"]
+    csv_formats = [""] * (len(headers) - 1) + ["{:.2f}"]
+    return Table("label_ng_reasons", headers, rows, formats, csv_formats, text_columns=2)
+
+
+def surface_accuracy_table(labels: LabelInfo) -> Table:
+    """Per split (and all): detected surfaces matched against the simulator's true faces."""
+    headers = ["split"] + [h for _, h, _ in ACCURACY_COLUMNS]
+    rows = []
+    for split in [*SPLITS, "all"]:
+        acc = labels.accuracy if split == "all" else labels.splits[split]["surface_accuracy"]
+        rows.append([split] + [acc.get(key) for key, _, _ in ACCURACY_COLUMNS])
+    formats = [""] + [f for _, _, f in ACCURACY_COLUMNS]
+    return Table("surface_accuracy", headers, rows, formats, csv_formats=[""] * len(headers))
+
+
+def render_labels(labels: LabelInfo | None, tables: dict[str, Table],
+                  figure: str | None) -> list[str]:
+    """README lines of the labels section (``figure``: the sample-labels figure, if drawn)."""
+    out = [f"## {LABEL_SECTION}", ""]
+    if labels is None:
+        return out + [LABEL_NOT_RUN, ""]
+    cfg = labels.manifest.get("config", {})
+    robot_checks = (cfg.get("label") or {}).get("robot_checks", True)
+    surf = cfg.get("surfaces") or {}
+    classes = ", ".join(f"{c.name} ({CLASS_MEANING[c]})" for c in GraspClass)
+    out += [
+        f"Grasp points and their classes from label artifact `{labels.version}`, from its "
+        "manifest's metrics. Every visible planar face found by RANSAC gives one grasp point "
+        f"(its centre); its class is one of {classes}.",
+        "",
+        "### Grasp points per class",
+        "",
+        "*hand*: the hand-level class from the surface alone (Figs. 5, 6); *robot*: the final "
+        "class after the robot-level check (Fig. 4e), which turns B, L and R into NG when the "
+        "robot cannot take the grasp"
+        + ("" if robot_checks else " (not run: `label.robot_checks=false`, so both levels agree)")
+        + ". Percentages are of the row's grasp points.",
+        "",
+        tables["label_classes"].markdown(),
+        "### NG reasons",
+        "",
+        "Grasp points labelled NG, by the check that failed: "
+        + "; ".join(f"*{r}* ({NG_REASON_LEVEL[r]} level): {m}"
+                    for r, m in NG_REASON_MEANING.items()) + ".",
+        "",
+        tables["label_ng_reasons"].markdown(),
+        "### Surface detection accuracy",
+        "",
+        "Detected surfaces against the true visible faces computed from the simulator's box "
+        "poses" + (f" (faces with at least {surf['truth_min_visible_px']} visible pixels; a "
+                   f"match has the same box, centres within "
+                   f"{1000 * float(surf['match_max_center_dist']):g} mm and normals within "
+                   f"{float(surf['match_max_normal_deg']):g}°)"
+                   if {"truth_min_visible_px", "match_max_center_dist",
+                       "match_max_normal_deg"} <= set(surf) else "")
+        + ". *Found*: matched true faces; *missed*: true faces without a detection; "
+        "*spurious*: detections without a true face. Errors are over the matched pairs: "
+        "the grasp point's distance in the image (px) and in 3-D (mm), and the angle between "
+        "the normals.",
+        "",
+        tables["surface_accuracy"].markdown(),
+        "### Throughput",
+        "",
+        "Labelling speed (scenes per second; seconds per scene for surface detection and for "
+        "the robot-level checks) depends on the machine and the run, so it is not copied into "
+        "this report, whose files depend on the artifact versions alone: see the label "
+        f"manifest's timings (`scenes_per_s`, `surface_detection_s_per_scene`, "
+        f"`robot_checks_s_per_scene` in `data/label/{labels.version}/manifest.json`).",
+        "",
+        "CSV versions: [tables/label_classes.csv](tables/label_classes.csv), "
+        "[tables/label_ng_reasons.csv](tables/label_ng_reasons.csv), "
+        "[tables/surface_accuracy.csv](tables/surface_accuracy.csv)."
+        + (f" Sample labels: [{figure}]({figure})." if figure else ""),
+        "",
+    ]
+    return out
 
 
 # ---------------------------------------------------------------------- README
@@ -345,7 +482,8 @@ def _commit(manifest: dict) -> str:
 
 
 def render_readme(version: str, upstream: dict[str, tuple[str, dict]], tables: dict[str, Table],
-                  figures: dict[str, str], gen_cfg: dict, stats: DatasetStats) -> str:
+                  figures: dict[str, str], gen_cfg: dict, stats: DatasetStats,
+                  labels: LabelInfo | None = None) -> str:
     phys = gen_cfg.get("physics", {})
     dt = float(phys.get("time_step", 1 / 240))
     cap = phys.get("max_settle_steps")
@@ -364,6 +502,8 @@ def render_readme(version: str, upstream: dict[str, tuple[str, dict]], tables: d
     ]
     for stage, (ver, manifest) in upstream.items():
         out.append(f"| {stage} | `{ver}` | {_commit(manifest)} |")
+    if labels is None:
+        out.append(f"| label | not run yet (`make label`) | {NONE} |")
     out += [
         "",
         "Each artifact lives in `data/<stage>/<version>/`; its `manifest.json` holds the full "
@@ -390,9 +530,10 @@ def render_readme(version: str, upstream: dict[str, tuple[str, dict]], tables: d
         "CSV versions: [tables/dataset_splits.csv](tables/dataset_splits.csv), "
         "[tables/box_types.csv](tables/box_types.csv).",
         "",
-        "## Figures",
-        "",
     ]
+    label_figure = "figures/labels_sample.png"
+    out += render_labels(labels, tables, label_figure if label_figure in figures else None)
+    out += ["## Figures", ""]
     for rel, caption in figures.items():
         out += [f"![{caption}]({rel})", "", f"*{caption}*", ""]
     out += [
@@ -443,7 +584,9 @@ def publish(artifact_dir: Path, reports_dir: Path) -> list[Path]:
 def report(cfg: DictConfig) -> Path:
     """Run the report stage; returns the artifact folder (reused if it already exists).
 
-    Raises ``ArtifactError`` (from ``resolve_artifact``) when there is no generation artifact.
+    Raises ``ArtifactError`` (from ``resolve_artifact``) when there is no generation artifact,
+    and from ``resolve_labels`` when the label artifact does not match it (no label artifact at
+    all is fine: the report then leaves the labels out).
     """
     root = data_root(cfg)
     gen_dir = resolve_artifact(root, "generate", cfg.report.generate_version)
@@ -453,8 +596,11 @@ def report(cfg: DictConfig) -> Path:
     num_samples = int(cfg.report.num_sample_images)
     if num_samples < 0:
         raise ValueError(f"report.num_sample_images must be >= 0, got {num_samples}")
+    labels = resolve_labels(root, str(cfg.report.label_version), gen_version)
     config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
     upstream = {"generate": gen_version}
+    if labels is not None:
+        upstream["label"] = labels.version
     version = compute_version(STAGE, config, upstream)
     gen_cfg = gen_manifest.get("config", {})
 
@@ -465,6 +611,11 @@ def report(cfg: DictConfig) -> Path:
         max_count = int(gen_cfg.get("boxes", {}).get(
             "max_count", max(len(m.get("boxes_per_scene_histogram", [0])) for m in splits.values()) - 1))
         tables = {t.name: t for t in (splits_table(splits, stats, dt), box_types_table(stats))}
+        if labels is not None:
+            check_labels(labels, stats)
+            for t in (label_classes_table(labels), label_ng_reasons_table(labels),
+                      surface_accuracy_table(labels)):
+                tables[t.name] = t
         for t in tables.values():
             path = run.work_dir / "tables" / f"{t.name}.csv"
             path.parent.mkdir(parents=True, exist_ok=True)
@@ -481,9 +632,18 @@ def report(cfg: DictConfig) -> Path:
         figure_boxes_per_scene(splits, max_count, run.work_dir / "figures" / "boxes_per_scene.png")
         figures["figures/boxes_per_scene.png"] = (
             "Boxes at rest per scene, all splits stacked (from the generation manifest).")
+        if labels is not None and num_samples > 0:
+            split, drawn = figure_labels_sample(gen_dir, labels.folder, num_samples,
+                                                run.work_dir / "figures" / "labels_sample.png")
+            figures["figures/labels_sample.png"] = (
+                f"Grasp points of {drawn} depth images of the {split} split, coloured by their "
+                "class after the robot-level check (R red, L green, B blue, NG grey; paper "
+                "Fig. 4f)." if drawn else "No labelled scenes to draw.")
 
-        readme = render_readme(run.version, {"generate": (gen_version, gen_manifest)}, tables,
-                               figures, gen_cfg, stats)
+        used = {"generate": (gen_version, gen_manifest)}
+        if labels is not None:
+            used["label"] = (labels.version, labels.manifest)
+        readme = render_readme(run.version, used, tables, figures, gen_cfg, stats, labels)
         (run.work_dir / "README.md").write_text(readme)
 
         with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version) as log:
@@ -500,8 +660,11 @@ def report(cfg: DictConfig) -> Path:
 
         run.metrics.update({
             "generate_version": gen_version,
+            "label_version": labels.version if labels is not None else None,
             "scenes": dict(stats.scenes),
             "boxes": dict(stats.boxes),
+            "grasp_points": ({s: int(labels.splits[s]["grasp_points"]) for s in SPLITS}
+                             if labels is not None else None),
             "tables": sorted(f"tables/{name}.csv" for name in tables),
             "figures": sorted(figures),
         })

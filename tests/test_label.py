@@ -99,3 +99,19 @@ def test_without_robot_checks_hand_classes_stand(labelled):
     folder = label(_cfg("label", root, "label.workers=1", "label.robot_checks=false"))
     rows = LabelSet(folder, "train")[0]
     assert (rows["grasp_class"] == rows["hand_class"]).all()
+
+
+def test_hand_config_matches_the_robot_urdf():
+    from pipeline.robot import urdf_builder
+
+    cfg = compose("label", ["experiment=smoke"])
+    assert cfg.hand.cup_diameter == urdf_builder.CUP_DIAMETER
+    assert cfg.hand.cup_offset == urdf_builder.CUP_OFFSET
+    assert cfg.robot.home_camera_height == cfg.camera.height_above_bin_floor
+
+
+def test_label_without_generation_says_what_to_do(tmp_path):
+    from pipeline.artifacts.store import ArtifactError
+
+    with pytest.raises(ArtifactError, match="make generate"):
+        label(_cfg("label", tmp_path))

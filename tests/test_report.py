@@ -1,9 +1,11 @@
-"""The report stage on a tiny generated dataset (4 train, 1 val, 2 test scenes)."""
+"""The report stage on a tiny generated and labelled dataset (4 train, 1 val, 2 test scenes)."""
 
 from __future__ import annotations
 
 import csv
 import io
+import re
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -14,11 +16,16 @@ from pipeline.artifacts import ArtifactError, load_manifest, verify_artifact
 from pipeline.cli import compose, stage_main
 from pipeline.dataset.scenes import SPLITS, SceneDataset
 from pipeline.generate import generate
-from pipeline.report import _outline, publish, report
+from pipeline.label import LabelSet, label
+from pipeline.labelling.types import GraspClass
+from pipeline.report import (
+    LABEL_NOT_RUN, LabelInfo, _outline, check_labels, dataset_stats, publish, report,
+)
 
 TINY = ("generate.num_scenes=4", "generate.num_val_scenes=1", "generate.num_test_scenes=2",
         "generate.workers=1")
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+LABEL_TABLES = ("label_classes.csv", "label_ng_reasons.csv", "surface_accuracy.csv")
 
 
 def _cfg(root: Path, name: str, *overrides: str):
@@ -27,10 +34,15 @@ def _cfg(root: Path, name: str, *overrides: str):
                           *overrides])
 
 
+def _generate_and_label(root: Path) -> None:
+    generate(_cfg(root, "generate", *TINY))
+    label(_cfg(root, "label", *TINY, "label.workers=1"))
+
+
 @pytest.fixture(scope="module")
 def root_a(tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp("root_a")
-    generate(_cfg(root, "generate", *TINY))
+    _generate_and_label(root)
     return root
 
 
@@ -43,14 +55,51 @@ def _read_csv(path: Path) -> list[dict[str, str]]:
     return list(csv.DictReader(io.StringIO(path.read_text())))
 
 
+def _section(readme: str, heading: str) -> str:
+    """The README text under ``heading`` (a whole line) up to the next heading of any level."""
+    lines = readme.splitlines()
+    start = lines.index(heading) + 1
+    end = next((i for i in range(start, len(lines)) if lines[i].startswith("#")), len(lines))
+    return "\n".join(lines[start:end])
+
+
+def _md_table(text: str) -> list[dict[str, str]]:
+    """The first Markdown table in ``text`` as one dict per row (cells stripped)."""
+    rows = [line for line in text.splitlines() if line.startswith("|")]
+    cells = [[c.strip() for c in row.strip().strip("|").split("|")] for row in rows]
+    return [dict(zip(cells[0], r)) for r in cells[2:]]
+
+
+@pytest.fixture(scope="module")
+def label_dir(root_a: Path) -> Path:
+    return (root_a / "data" / "label" / "latest").resolve()
+
+
+@pytest.fixture(scope="module")
+def label_metrics(label_dir: Path) -> dict:
+    return load_manifest(label_dir)["metrics"]
+
+
+@pytest.fixture(scope="module")
+def root_gen_only(root_a: Path, tmp_path_factory) -> Path:
+    """A root holding root_a's generation artifact and no label artifact."""
+    root = tmp_path_factory.mktemp("gen_only")
+    shutil.copytree(root_a / "data" / "generate", root / "data" / "generate", symlinks=True)
+    return root
+
+
 def test_readme_names_versions_and_split_counts(root_a: Path, report_a: Path) -> None:
     gen_dir = (root_a / "data" / "generate" / "latest").resolve()
     readme = (root_a / "reports" / "README.md").read_text()
     assert gen_dir.name in readme
     assert report_a.name in readme
-    assert load_manifest(report_a)["upstream"] == {"generate": gen_dir.name}
+    label_dir = (root_a / "data" / "label" / "latest").resolve()
+    assert label_dir.name in readme
+    assert load_manifest(report_a)["upstream"] == {"generate": gen_dir.name,
+                                                   "label": label_dir.name}
+    dataset = _section(readme, "## Dataset")
     rows = {line.split("|")[1].strip(): [c.strip() for c in line.strip("|\n ").split("|")]
-            for line in readme.splitlines()
+            for line in dataset.splitlines()
             if line.startswith("| ") and line.split("|")[1].strip() in (*SPLITS, "all")}
     assert [rows[s][1] for s in SPLITS] == ["4", "1", "2"]
     assert rows["all"][1] == "7"
@@ -61,6 +110,131 @@ def test_readme_names_versions_and_split_counts(root_a: Path, report_a: Path) ->
     # nothing run-dependent: no absolute paths, no creation times
     assert str(root_a) not in readme
     assert load_manifest(gen_dir)["created"] not in readme
+    assert load_manifest(label_dir)["created"] not in readme
+
+
+def test_readme_label_tables_match_label_manifest(root_a: Path, report_a: Path,
+                                                  label_metrics: dict) -> None:
+    readme = (root_a / "reports" / "README.md").read_text()
+    assert "## Labels (paper Sec. 4.3, Figs. 4–6)" in readme
+    assert LABEL_NOT_RUN not in readme
+    splits = label_metrics["splits"]
+
+    classes = _md_table(_section(readme, "### Grasp points per class"))
+    assert [(r["split"], r["level"]) for r in classes] == [
+        (s, level) for s in (*SPLITS, "all") for level in ("hand", "robot")]
+    for r in classes:
+        key = "hand_level_classes" if r["level"] == "hand" else "classes"
+        if r["split"] == "all":
+            counts = {c.name: sum(splits[s][key][c.name] for s in SPLITS) for c in GraspClass}
+            scenes = sum(splits[s]["scenes"] for s in SPLITS)
+        else:
+            counts, scenes = splits[r["split"]][key], splits[r["split"]]["scenes"]
+        total = sum(counts.values())
+        assert int(r["scenes"]) == scenes
+        assert int(r["grasp points"]) == total
+        if r["split"] != "all":
+            assert total == splits[r["split"]]["grasp_points"]
+        for c in GraspClass:
+            assert int(r[c.name]) == counts[c.name]
+            assert r[f"{c.name} (%)"] == f"{100 * counts[c.name] / total:.1f}"
+
+    reasons = {r["NG reason"]: r for r in _md_table(_section(readme, "### NG reasons"))}
+    assert {"too_small", "center_occluded", "ik", "joint_limits", "collision", "total"} <= set(
+        reasons)
+    for name, r in reasons.items():
+        for s in SPLITS:
+            expected = (splits[s]["classes"]["NG"] if name == "total"
+                        else splits[s]["ng_reasons"].get(name, 0))
+            assert int(r[s]) == expected, (name, s)
+    assert int(reasons["total"]["all"]) == sum(splits[s]["classes"]["NG"] for s in SPLITS)
+    assert reasons["too_small"]["level"] == "hand"
+    assert reasons["collision"]["level"] == "robot"
+
+    accuracy = {r["split"]: r for r in _md_table(_section(readme, "### Surface detection accuracy"))}
+    assert list(accuracy) == [*SPLITS, "all"]
+    columns = {"images": "images", "found": "found", "missed": "missed", "spurious": "spurious",
+               "precision": "precision", "recall": "recall",
+               "centre error median (px)": "center_err_px_median",
+               "centre error p90 (px)": "center_err_px_p90",
+               "centre error median (mm)": "center_err_mm_median",
+               "centre error p90 (mm)": "center_err_mm_p90",
+               "normal error median (deg)": "normal_err_deg_median",
+               "normal error p90 (deg)": "normal_err_deg_p90"}
+    for split, r in accuracy.items():
+        m = label_metrics["surface_accuracy"] if split == "all" else splits[split]["surface_accuracy"]
+        for header, key in columns.items():
+            if m[key] is None:
+                assert r[header] == "—"
+            elif isinstance(m[key], int):
+                assert int(r[header]) == m[key], (split, header)
+            else:
+                assert r[header] == f"{m[key]:.3f}", (split, header)
+
+    # Throughput is run-dependent: the README points at the label manifest instead of copying it.
+    throughput = _section(readme, "### Throughput")
+    assert "timings" in throughput and "scenes_per_s" in throughput
+    label_version = load_manifest(report_a)["upstream"]["label"]
+    assert not re.search(r"\d", throughput.replace(label_version, "")), throughput
+
+
+def test_label_csvs_agree_with_manifest_and_labels(root_a: Path, report_a: Path,
+                                                   label_dir: Path, label_metrics: dict) -> None:
+    tables = root_a / "reports" / "tables"
+    splits = label_metrics["splits"]
+    classes = {(r["split"], r["level"]): r for r in _read_csv(tables / "label_classes.csv")}
+    for s in SPLITS:
+        labels = LabelSet(label_dir, s)
+        final = np.zeros(4, int)
+        hand = np.zeros(4, int)
+        for i in range(len(labels)):
+            final += np.bincount(labels[i]["grasp_class"], minlength=4)
+            hand += np.bincount(labels[i]["hand_class"], minlength=4)
+        for level, counts, key in (("robot", final, "classes"), ("hand", hand, "hand_level_classes")):
+            row = classes[(s, level)]
+            for c in GraspClass:
+                assert int(row[c.name]) == counts[c] == splits[s][key][c.name]
+                assert float(row[f"{c.name} (%)"]) == pytest.approx(100 * counts[c] / counts.sum(),
+                                                                    abs=0.005)
+    for level in ("hand", "robot"):
+        assert int(classes[("all", level)]["grasp points"]) == sum(
+            splits[s]["grasp_points"] for s in SPLITS)
+
+    reasons = {r["NG reason"]: r for r in _read_csv(tables / "label_ng_reasons.csv")}
+    for s in SPLITS:
+        for name, n in splits[s]["ng_reasons"].items():
+            assert int(reasons[name][s]) == n
+        assert int(reasons["total"][s]) == splits[s]["classes"]["NG"]
+
+    accuracy = {r["split"]: r for r in _read_csv(tables / "surface_accuracy.csv")}
+    for split, r in accuracy.items():
+        m = label_metrics["surface_accuracy"] if split == "all" else splits[split]["surface_accuracy"]
+        assert int(r["found"]) == m["found"] and int(r["missed"]) == m["missed"]
+        assert int(r["spurious"]) == m["spurious"] and int(r["images"]) == m["images"]
+        for header, key in (("recall", "recall"), ("precision", "precision"),
+                            ("centre error median (px)", "center_err_px_median"),
+                            ("centre error p90 (mm)", "center_err_mm_p90"),
+                            ("normal error p90 (deg)", "normal_err_deg_p90")):
+            if m[key] is None:
+                assert r[header] == ""
+            else:
+                assert float(r[header]) == m[key]  # full precision in the CSV
+    assert sum(int(accuracy[s]["images"]) for s in SPLITS) == 7
+    for name in LABEL_TABLES:
+        assert (report_a / "tables" / name).read_bytes() == (tables / name).read_bytes()
+
+
+def test_label_consistency_check(root_a: Path, label_dir: Path, label_metrics: dict) -> None:
+    gen_dir = (root_a / "data" / "generate" / "latest").resolve()
+    stats = dataset_stats(gen_dir)
+    manifest = load_manifest(label_dir)
+    good = LabelInfo(label_dir, manifest, manifest["metrics"]["splits"],
+                     manifest["metrics"]["surface_accuracy"])
+    check_labels(good, stats)
+    bad_splits = load_manifest(label_dir)["metrics"]["splits"]
+    bad_splits["test"]["classes"]["NG"] += 1
+    with pytest.raises(ArtifactError, match="inconsistent"):
+        check_labels(LabelInfo(label_dir, manifest, bad_splits, {}), stats)
 
 
 def test_csv_tables_agree_with_dataset(root_a: Path, report_a: Path) -> None:
@@ -99,7 +273,7 @@ def test_csv_tables_agree_with_dataset(root_a: Path, report_a: Path) -> None:
 
 
 def test_figures_are_png(root_a: Path, report_a: Path) -> None:
-    for name in ("sample_depth.png", "boxes_per_scene.png"):
+    for name in ("sample_depth.png", "boxes_per_scene.png", "labels_sample.png"):
         path = root_a / "reports" / "figures" / name
         data = path.read_bytes()
         assert data[:8] == PNG_SIGNATURE
@@ -113,26 +287,66 @@ def test_artifact_is_complete_and_logged(report_a: Path) -> None:
     files = load_manifest(report_a)["files"]
     assert {"README.md", "log.rrd", "log.mcap", "tables/dataset_splits.csv",
             "tables/box_types.csv", "figures/sample_depth.png",
-            "figures/boxes_per_scene.png"} <= set(files)
+            "figures/boxes_per_scene.png", "figures/labels_sample.png",
+            *(f"tables/{name}" for name in LABEL_TABLES)} <= set(files)
     from pipeline.tracking import mcap_message_counts
 
     counts = mcap_message_counts(report_a / "log.mcap")
     assert counts["/report/tables/dataset_splits"] >= 1
     assert counts["/report/tables/box_types"] >= 1
     assert counts["/report/figures"] >= 1
+    for name in LABEL_TABLES:
+        assert counts[f"/report/tables/{Path(name).stem}"] >= 1
 
 
 def test_report_is_reproducible_across_roots(root_a: Path, report_a: Path, tmp_path: Path) -> None:
     root_b = tmp_path / "root_b"
-    generate(_cfg(root_b, "generate", *TINY))
+    _generate_and_label(root_b)
     report_b = report(_cfg(root_b, "report"))
     assert report_b.name == report_a.name
+    assert load_manifest(report_b)["upstream"] == load_manifest(report_a)["upstream"]
     files_a = load_manifest(report_a)["files"]
     files_b = load_manifest(report_b)["files"]
     files_a.pop("log.rrd")
     files_b.pop("log.rrd")
-    assert "log.mcap" in files_a
+    assert "log.mcap" in files_a and "figures/labels_sample.png" in files_a
     assert files_a == files_b
+    for rel in files_a:  # byte-identical, not just equal hashes in the manifests
+        assert (report_a / rel).read_bytes() == (report_b / rel).read_bytes(), rel
+
+
+def test_report_without_label_artifact(root_gen_only: Path, report_a: Path) -> None:
+    out = report(_cfg(root_gen_only, "report"))
+    gen_version = (root_gen_only / "data" / "generate" / "latest").resolve().name
+    assert load_manifest(out)["upstream"] == {"generate": gen_version}
+    assert out.name != report_a.name
+    readme = (out / "README.md").read_text()
+    assert LABEL_NOT_RUN in readme
+    assert "Labelling: not run yet (`make label`)" in readme
+    assert "### Grasp points per class" not in readme
+    files = load_manifest(out)["files"]
+    assert "tables/dataset_splits.csv" in files and "figures/sample_depth.png" in files
+    assert not any(name in rel for rel in files for name in (*LABEL_TABLES, "labels_sample"))
+    # the dataset part is the same as with labels
+    for rel in ("tables/dataset_splits.csv", "tables/box_types.csv", "figures/sample_depth.png"):
+        assert (out / rel).read_bytes() == (report_a / rel).read_bytes()
+
+
+def test_named_label_version_must_exist(root_gen_only: Path) -> None:
+    with pytest.raises(ArtifactError, match="label"):
+        report(_cfg(root_gen_only, "report", "report.label_version=0123456789abcdef"))
+
+
+def test_label_artifact_of_another_generation_is_an_error(root_a: Path, tmp_path: Path) -> None:
+    gen_dir = (root_a / "data" / "generate" / "latest").resolve()
+    root = tmp_path / "mismatch"
+    # A second generation artifact (a copy under another name) and root_a's label artifact,
+    # which was made from the first one.
+    shutil.copytree(gen_dir, root / "data" / "generate" / "0000000000000000")
+    shutil.copytree(root_a / "data" / "label", root / "data" / "label", symlinks=True)
+    with pytest.raises(ArtifactError, match="make label") as info:
+        report(_cfg(root, "report", "report.generate_version=0000000000000000"))
+    assert gen_dir.name in str(info.value) and "report.label_version" in str(info.value)
 
 
 def test_rerun_reuses_artifact(root_a: Path, report_a: Path) -> None:

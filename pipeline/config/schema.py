@@ -194,6 +194,7 @@ class ReportConfig:
     """The report stage: which artifacts to gather and how many sample images to draw."""
 
     generate_version: str = "latest"
+    label_version: str = "latest"  # no label artifact at all: the report leaves labels out
     num_sample_images: int = 6
     force: bool = False
 

@@ -24,10 +24,14 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-import open3d as o3d
 
 from pipeline.camera.geometry import Intrinsics, project
 from pipeline.labelling.types import Surface
+
+# RANSAC stops once an all-inlier hypothesis has been drawn with this probability (open3d's
+# default for segment_plane).
+RANSAC_PROBABILITY = 0.99999999
+_RANSAC_CHUNK = 50
 
 # Face names in box-frame axis order, (axis, sign): "+x" is the face whose outward normal is +x.
 FACES = (("+x", 0, 1.0), ("-x", 0, -1.0), ("+y", 1, 1.0), ("-y", 1, -1.0),
@@ -138,12 +142,16 @@ def _region_surface(instance: int, us: np.ndarray, vs: np.ndarray, xn: np.ndarra
     pts = np.stack([xn[h] * z, yn[h] * z, z], axis=1)  # (K, 3)
     origin = pts[0]
     # Plane coordinates in millimetres: float32 for OpenCV without losing precision.
-    q = ((pts - origin) @ np.stack([e1, e2], axis=1) * 1000.0).astype(np.float32)
+    rel = (pts - origin) * 1000.0
+    q = np.stack([rel @ e1, rel @ e2], axis=1).astype(np.float32)
     rect = cv2.minAreaRect(q)
     (x0, y0), (x1, y1), (x2, y2), _ = cv2.boxPoints(rect).tolist()  # corners, mm
     side_a, side_b = (x1 - x0, y1 - y0), (x2 - x1, y2 - y1)
     len_a, len_b = float(np.hypot(*side_a)), float(np.hypot(*side_b))
-    long_2d, long_len, short_len = (side_a, len_a, len_b) if len_a >= len_b else (side_b, len_b, len_a)
+    if len_a >= len_b:
+        long_2d, long_len, short_len = side_a, len_a, len_b
+    else:
+        long_2d, long_len, short_len = side_b, len_b, len_a
     if long_len > 0:
         long_axis = (long_2d[0] * e1 + long_2d[1] * e2) / long_len
     else:  # a single pixel: any in-plane direction
@@ -151,8 +159,6 @@ def _region_surface(instance: int, us: np.ndarray, vs: np.ndarray, xn: np.ndarra
     long_axis = _orient_long_axis(long_axis)
     short_axis = _cross(normal, long_axis)
     centre = origin + (rect[0][0] / 1000.0) * e1 + (rect[0][1] / 1000.0) * e2
-    centre_px = np.array([intr.fx * centre[0] / centre[2] + intr.cx,
-                          intr.fy * centre[1] / centre[2] + intr.cy])
     # Footprint of one pixel on the plane: z² / (fx fy |n · r|) with r = (x/z, y/z, 1) and
     # z = offset / (n · r), i.e. offset² / (fx fy |n · r|³).
     s = -n_dot_r
@@ -161,7 +167,7 @@ def _region_surface(instance: int, us: np.ndarray, vs: np.ndarray, xn: np.ndarra
         instance=int(instance), center_cam=centre, normal_cam=np.array(normal, dtype=np.float64),
         long_axis_cam=long_axis, short_axis_cam=short_axis,
         long_length=long_len / 1000.0, short_length=short_len / 1000.0,
-        center_px=centre_px, num_points=int(len(us)), area=area, extra=extra,
+        center_px=project(centre, intr), num_points=int(len(us)), area=area, extra=extra,
     )
 
 
@@ -222,38 +228,58 @@ def _instance_pixels(depth_m: np.ndarray, mask: np.ndarray, intr: Intrinsics):
 
 def _ransac_numpy(sample: np.ndarray, cfg: SurfaceDetectionConfig,
                   rng: np.random.Generator) -> tuple[np.ndarray, float] | None:
-    """Best plane (n, c) of ``num_iterations`` random ``ransac_n``-point hypotheses on the (M, 3)
-    ``sample``: the one with most inliers (the first drawn among equals; the least-squares
-    refinement that follows makes equals equivalent)."""
+    """Best plane (n, c) of up to ``num_iterations`` random ``ransac_n``-point hypotheses on the
+    (M, 3) ``sample``: the one with most inliers (the first drawn among equals; the
+    least-squares refinement that follows makes equals equivalent).
+
+    Like open3d, stops once enough hypotheses were tried to have drawn an all-inlier one with
+    probability ``RANSAC_PROBABILITY`` given the best inlier fraction w so far, i.e. after
+    log(1 − p) / log(1 − w^n) of them; they are scored in chunks of ``_RANSAC_CHUNK``.
+    All hypotheses are drawn first, so where it stops does not change what is drawn.
+    """
     m, k, r = len(sample), cfg.num_iterations, cfg.ransac_n
-    picks = sample[rng.integers(0, m, size=(k, r))]  # (K, r, 3)
-    if r == 3:
-        a, b = picks[:, 1] - picks[:, 0], picks[:, 2] - picks[:, 0]
-        normals = np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],
-                            a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
-                            a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
-    else:
-        centred = picks - picks.mean(axis=1, keepdims=True)
-        normals = np.linalg.eigh(np.einsum("kri,krj->kij", centred, centred))[1][:, :, 0]
-    length = np.sqrt(np.einsum("ki,ki->k", normals, normals))
-    ok = length > 1e-12  # repeated or collinear picks give no plane
-    if not ok.any():
-        return None
-    normals = normals[ok] / length[ok, None]
-    offsets = np.einsum("ki,ki->k", normals, picks[ok, 0])
+    draws = rng.integers(0, m, size=(k, r))
+    origin = sample[0]
     # Scoring in float32 about the sample's first point (errors ~1e-8 m, far below the
     # threshold): float64 matrix products with an inner size of 3 are ~7x slower here.
-    origin = sample[0]
-    dist = np.abs(normals.astype(np.float32) @ (sample - origin).T.astype(np.float32)
-                  - (offsets - normals @ origin).astype(np.float32)[:, None])  # (K', M)
-    inlier = dist < cfg.distance_threshold
-    best = int(np.argmax(np.count_nonzero(inlier, axis=1)))  # ties: the first drawn
-    return normals[best], float(offsets[best])
+    local = (sample - origin).T.astype(np.float32)  # (3, M)
+    best_count, best = 0, None
+    for start in range(0, k, _RANSAC_CHUNK):
+        picks = sample[draws[start:start + _RANSAC_CHUNK]] - origin  # (C, r, 3)
+        if r == 3:
+            u, v = picks[:, 1] - picks[:, 0], picks[:, 2] - picks[:, 0]
+            normals = np.stack([u[:, 1] * v[:, 2] - u[:, 2] * v[:, 1],
+                                u[:, 2] * v[:, 0] - u[:, 0] * v[:, 2],
+                                u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]], axis=1)
+        else:
+            centred = picks - picks.mean(axis=1, keepdims=True)
+            normals = np.linalg.eigh(np.einsum("kri,krj->kij", centred, centred))[1][:, :, 0]
+        length = np.sqrt(np.einsum("ki,ki->k", normals, normals))
+        ok = length > 1e-12  # repeated or collinear picks give no plane
+        if ok.any():
+            normals = normals[ok] / length[ok, None]
+            offsets = np.einsum("ki,ki->k", normals, picks[ok, 0])  # relative to origin
+            dist = np.abs(normals.astype(np.float32) @ local
+                          - offsets.astype(np.float32)[:, None])  # (C', M)
+            counts = np.count_nonzero(dist < cfg.distance_threshold, axis=1)
+            j = int(np.argmax(counts))
+            if counts[j] > best_count:
+                best_count = int(counts[j])
+                best = (normals[j], float(offsets[j] + normals[j] @ origin))
+        if best_count >= m:
+            break
+        if best_count > 0:
+            needed = np.log(1.0 - RANSAC_PROBABILITY) / np.log(1.0 - (best_count / m) ** r)
+            if start + _RANSAC_CHUNK >= needed:
+                break
+    return best
 
 
 def _ransac_open3d(sample: np.ndarray, cfg: SurfaceDetectionConfig,
                    seed: int) -> tuple[np.ndarray, float] | None:
     """open3d's ``segment_plane`` on the sample (not reproducible run to run, see the config)."""
+    import open3d as o3d  # imported here: ~1.5 s, and only this optional backend needs it
+
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(sample))
     o3d.utility.random.seed(seed)
     model, _ = cloud.segment_plane(distance_threshold=cfg.distance_threshold,
@@ -265,9 +291,20 @@ def _ransac_open3d(sample: np.ndarray, cfg: SurfaceDetectionConfig,
     return n / scale, -float(model[3]) / scale
 
 
-def _find_planes(points: np.ndarray, cfg: SurfaceDetectionConfig,
-                 instance: int) -> list[tuple[np.ndarray, float]]:
-    """Sequential RANSAC on one cluster: up to ``max_surfaces_per_object`` planes (n, c)."""
+@dataclass
+class _Plane:
+    """A plane ``normal · X = offset`` found in a cluster, and its inliers (bool per point).
+    ``axes`` is the (e1, e2) of ``_fit_plane`` when the plane is exactly the least-squares fit of
+    ``inliers`` (refinement converged), else None."""
+
+    normal: np.ndarray
+    offset: float
+    inliers: np.ndarray
+    axes: tuple[np.ndarray, np.ndarray] | None
+
+
+def _find_planes(points: np.ndarray, cfg: SurfaceDetectionConfig, instance: int) -> list[_Plane]:
+    """Sequential RANSAC on one cluster's (N, 3) points: up to ``max_surfaces_per_object``."""
     if cfg.ransac_backend not in ("numpy", "open3d"):
         raise ValueError(f"ransac_backend must be 'numpy' or 'open3d', not {cfg.ransac_backend!r}")
     if cfg.ransac_n < 3:
@@ -275,11 +312,22 @@ def _find_planes(points: np.ndarray, cfg: SurfaceDetectionConfig,
     thr = cfg.distance_threshold
     remaining = np.ones(len(points), dtype=bool)
     left = len(points)
-    planes: list[tuple[np.ndarray, float]] = []
+    planes: list[_Plane] = []
     rng = np.random.default_rng([int(cfg.seed), instance])  # depends only on (seed, instance)
     while len(planes) < cfg.max_surfaces_per_object and left >= cfg.min_inliers:
+        rest = np.flatnonzero(remaining)
         stride = -(-left // cfg.ransac_max_points)  # ceil
-        sample = points[np.flatnonzero(remaining)[::stride]]
+        sample = points[rest[::stride]]
+        # Shortcut: if every remaining point lies within the threshold of their least-squares
+        # plane (one face left, e.g. a box lying flat), RANSAC and its refinement would end at
+        # that same plane and inlier set; skip them. Tried on the sample first (cheaper).
+        n, c, _, _ = _fit_plane(sample)
+        if np.abs(sample @ n - c).max() < thr:
+            rest_points = points.take(rest, axis=0)
+            n, c, e1, e2 = _fit_plane(rest_points)
+            if np.abs(rest_points @ n - c).max() < thr:
+                planes.append(_Plane(n, c, remaining.copy(), (e1, e2)))
+                break
         if cfg.ransac_backend == "numpy":
             plane = _ransac_numpy(sample, cfg, rng)
         else:
@@ -288,21 +336,23 @@ def _find_planes(points: np.ndarray, cfg: SurfaceDetectionConfig,
         if plane is None:
             break
         n, c = plane
+        axes = None
         inliers = remaining & (np.abs(points @ n - c) < thr)
         count = int(inliers.sum())
         # Least-squares refinement on all remaining points of the cluster, to a fixed point.
         for _ in range(cfg.refine_iterations):
             if count < 3:
                 break
-            n, c, _, _ = _fit_plane(points.take(np.flatnonzero(inliers), axis=0))
+            n, c, e1, e2 = _fit_plane(points.take(np.flatnonzero(inliers), axis=0))
             new = remaining & (np.abs(points @ n - c) < thr)
             new_count = int(new.sum())
             if new_count == count and np.array_equal(new, inliers):
+                axes = (e1, e2)
                 break
             inliers, count = new, new_count
         if count < cfg.min_inliers:
             break
-        planes.append((n, c))
+        planes.append(_Plane(n, c, inliers, axes))
         remaining &= ~inliers
         left -= count
     return planes
@@ -317,9 +367,12 @@ def detect_surfaces(depth_m: np.ndarray, mask: np.ndarray, intrinsics: Intrinsic
     that crop that a simulator gives for free (no tuning of crop boxes, no leaks between
     touching boxes), which keeps label errors down to the surface fit itself.
 
-    Per cluster: open3d RANSAC (``segment_plane``) on a strided subsample, a least-squares refit
-    on all the cluster's points, removal of the inliers, repeated until fewer than
-    ``min_inliers`` points remain or ``max_surfaces_per_object`` planes are found. Each cluster
+    Per cluster: RANSAC on a strided subsample (a seeded numpy implementation by default, or
+    open3d's ``segment_plane``, see ``SurfaceDetectionConfig.ransac_backend``), least-squares
+    refits on all the cluster's points until the inliers stop changing, removal of the inliers;
+    repeated until fewer than ``min_inliers`` points remain or ``max_surfaces_per_object``
+    planes are found (when all remaining points already lie on one plane, that plane is taken
+    without RANSAC). Each cluster
     point is then assigned to its nearest plane (if within ``distance_threshold``), so that
     pixels next to an edge go to the face they lie on rather than to the plane found first.
     A plane's surface is its largest connected region of pixels (coplanar patches separated by an
@@ -341,6 +394,8 @@ def detect_surfaces(depth_m: np.ndarray, mask: np.ndarray, intrinsics: Intrinsic
     """
     cfg = cfg or SurfaceDetectionConfig()
     _check_images(depth_m, mask, intrinsics)
+    if cfg.connectivity not in (4, 8):
+        raise ValueError(f"connectivity must be 4 or 8, not {cfg.connectivity}")
     thr = cfg.distance_threshold
     surfaces: list[Surface] = []
     for instance, us, vs, xn, yn, points in _instance_pixels(depth_m, mask, intrinsics):
@@ -349,14 +404,16 @@ def detect_surfaces(depth_m: np.ndarray, mask: np.ndarray, intrinsics: Intrinsic
         planes = _find_planes(points, cfg, instance)
         if not planes:
             continue
-        normals = np.stack([n for n, _ in planes], axis=1)  # (3, P)
-        residual = np.abs(points @ normals - np.array([c for _, c in planes]))  # (N, P)
-        nearest = np.argmin(residual, axis=1)
+        # Each point goes to its nearest plane, if within the threshold: pixels next to an edge
+        # go to the face they lie on, not to the plane that was found first.
+        residual = np.stack([np.abs(points @ pl.normal - pl.offset) for pl in planes], axis=1)
+        nearest = np.argmin(residual, axis=1)  # (N,)
         assigned = residual[np.arange(len(points)), nearest] < thr
         regions = _RegionFinder(us, vs, cfg.connectivity)
         found = []
-        for j in range(len(planes)):
-            idx = np.flatnonzero(assigned & (nearest == j))
+        for j, plane in enumerate(planes):
+            sel = assigned & (nearest == j)
+            idx = np.flatnonzero(sel)
             plane_pixels = len(idx)
             if plane_pixels < cfg.min_inliers:
                 continue
@@ -366,7 +423,12 @@ def detect_surfaces(depth_m: np.ndarray, mask: np.ndarray, intrinsics: Intrinsic
                 if len(idx) < cfg.min_inliers:
                     continue
             region_points = points.take(idx, axis=0)
-            n, c, e1, e2 = _fit_plane(region_points)
+            if (keep is None and plane.axes is not None and plane_pixels == plane.inliers.sum()
+                    and np.array_equal(sel, plane.inliers)):
+                # The region is exactly the refinement's inlier set: the same least-squares fit.
+                n, c, (e1, e2) = plane.normal, plane.offset, plane.axes
+            else:
+                n, c, e1, e2 = _fit_plane(region_points)
             rmse = float(np.sqrt(np.mean((region_points @ n - c) ** 2)))
             surface = _region_surface(instance, us[idx], vs[idx], xn[idx], yn[idx], n, c, e1, e2,
                                       intrinsics, {"rmse_m": rmse, "plane_pixels": plane_pixels,
@@ -400,6 +462,10 @@ def true_visible_faces(depth_m: np.ndarray, mask: np.ndarray, intrinsics: Intrin
         boxes: sequence of objects with ``size`` (3,) edge lengths in metres and ``T_cam_box``
             (4, 4) pose in the camera frame, e.g. ``pipeline.dataset.scenes.Box``.
         min_visible_px: fewest pixels in the visible region.
+        tolerance_m: distance to the face plane and margin around the face rectangle.
+
+    Pass noise-free depth (``sensor=ideal``): with sensor noise the tolerance drops pixels
+    and the regions get holes.
 
     Returns:
         Surfaces ordered by instance, then by decreasing pixel count. ``extra``: ``face`` ("+x",
@@ -411,7 +477,8 @@ def true_visible_faces(depth_m: np.ndarray, mask: np.ndarray, intrinsics: Intrin
     surfaces: list[Surface] = []
     for instance, us, vs, xn, yn, points in _instance_pixels(depth_m, mask, intrinsics):
         if instance > len(boxes):
-            raise ValueError(f"mask has instance {instance} but only {len(boxes)} boxes were given")
+            raise ValueError(f"mask has instance {instance} but only {len(boxes)} boxes were "
+                             "given; pass the scene's boxes in instance order")
         if len(us) < min_visible_px:
             continue
         box = boxes[instance - 1]
@@ -474,7 +541,8 @@ def _stats(values: list[float], prefix: str) -> dict:
     if not values:
         return {f"{prefix}_median": None, f"{prefix}_p90": None}
     arr = np.asarray(values, dtype=np.float64)
-    return {f"{prefix}_median": float(np.median(arr)), f"{prefix}_p90": float(np.percentile(arr, 90))}
+    return {f"{prefix}_median": float(np.median(arr)),
+            f"{prefix}_p90": float(np.percentile(arr, 90))}
 
 
 def _summary(pairs: list[dict], found: int, missed: int, spurious: int) -> dict:
@@ -524,7 +592,8 @@ def match_surfaces(detected: list[Surface], truth: list[Surface], max_center_dis
         pairs.append({
             "instance": int(t.instance), "detected": i, "truth": j,
             "face": t.extra.get("face"),
-            "center_err_px": float(np.linalg.norm(np.asarray(d.center_px) - np.asarray(t.center_px))),
+            "center_err_px": float(np.linalg.norm(np.asarray(d.center_px, float)
+                                                  - np.asarray(t.center_px, float))),
             "center_err_mm": dist * 1000.0, "normal_err_deg": angle,
             "truth_points": int(t.num_points), "detected_points": int(d.num_points),
         })

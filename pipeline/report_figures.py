@@ -1,0 +1,196 @@
+"""Figures of the report stage (``pipeline.report``), drawn with matplotlib's Agg backend.
+
+Every figure is a function of its inputs alone: fixed size and dpi, no wall-clock text, and PNGs
+written without the "Software" metadata, so the same artifacts give byte-identical files.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import numpy as np  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+from matplotlib.ticker import MaxNLocator  # noqa: E402
+
+from pipeline.dataset.scenes import SPLITS, SceneDataset  # noqa: E402
+from pipeline.label import CLASS_COLORS, LabelSet  # noqa: E402
+from pipeline.labelling.types import GraspClass  # noqa: E402
+
+FIG_DPI = 100
+# PNG text chunks: matplotlib writes "Software: matplotlib version ..." unless told not to.
+PNG_METADATA = {"Software": None}
+NO_DATA = "#5c3a21"  # depth pixels without a value, in the labels figure (brown)
+CLASS_MEANING = {GraspClass.R: "right cup", GraspClass.L: "left cup", GraspClass.B: "both cups",
+                 GraspClass.NG: "not graspable"}
+
+def _save(fig: Figure, path: Path) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=FIG_DPI, format="png", metadata=PNG_METADATA)
+
+
+def _outline(mask: np.ndarray) -> np.ndarray:
+    """Box pixels next to a pixel of another mask value (a one-pixel outline inside each box)."""
+    m = mask.astype(np.int32)
+    edge = np.zeros(m.shape, dtype=bool)
+    dx = m[:, 1:] != m[:, :-1]
+    dy = m[1:, :] != m[:-1, :]
+    edge[:, 1:] |= dx
+    edge[:, :-1] |= dx
+    edge[1:, :] |= dy
+    edge[:-1, :] |= dy
+    return edge & (m > 0)
+
+
+def _mask_rgb(mask: np.ndarray) -> np.ndarray:
+    """Instance mask as RGB: background black, instances from a fixed 20-colour palette."""
+    from matplotlib import colormaps
+
+    palette = colormaps["tab20"](np.arange(20))[:, :3]
+    lut = np.zeros((256, 3))
+    lut[1:] = palette[(np.arange(255)) % 20]
+    return lut[mask]
+
+
+def sample_split(gen_dir: Path) -> str | None:
+    """The split the sample figure draws from: test, else train, else val (None = no scenes)."""
+    for split in ("test", "train", "val"):
+        if len(SceneDataset(gen_dir, split)):
+            return split
+    return None
+
+
+def figure_sample_depth(gen_dir: Path, num: int, path: Path) -> tuple[str | None, int]:
+    """Grid of (depth with mask outlines | instance mask) pairs; returns (split, images drawn)."""
+    split = sample_split(gen_dir)
+    ds = SceneDataset(gen_dir, split) if split else None
+    n = min(num, len(ds)) if ds is not None else 0
+    if n == 0:
+        fig = Figure(figsize=(6.0, 2.0), dpi=FIG_DPI)
+        fig.text(0.5, 0.5, "no scenes in the generation artifact", ha="center", va="center")
+        _save(fig, path)
+        return split, 0
+    scenes = [ds[i] for i in range(n)]
+    valid = np.concatenate([s.depth_m[s.depth_m > 0] for s in scenes])
+    vmin, vmax = (float(valid.min()), float(valid.max())) if valid.size else (0.0, 1.0)
+    if vmax <= vmin:
+        vmax = vmin + 1e-3
+    pairs_per_row = min(3, n)
+    rows = math.ceil(n / pairs_per_row)
+    fig = Figure(figsize=(4.4 * pairs_per_row + 1.2, 2.4 * rows + 0.5), dpi=FIG_DPI,
+                 layout="constrained")
+    axes = fig.subplots(rows, 2 * pairs_per_row, squeeze=False)
+    cmap = matplotlib.colormaps["viridis"].with_extremes(bad="0.75")
+    im = None
+    for ax in axes.ravel():
+        ax.set_axis_off()
+    for i, scene in enumerate(scenes):
+        r, c = divmod(i, pairs_per_row)
+        ax_d, ax_m = axes[r, 2 * c], axes[r, 2 * c + 1]
+        depth = np.where(scene.depth_m > 0, scene.depth_m, np.nan)
+        im = ax_d.imshow(depth, cmap=cmap, vmin=vmin, vmax=vmax, interpolation="nearest")
+        edge = _outline(scene.mask)
+        overlay = np.zeros(edge.shape + (4,))
+        overlay[edge] = (1.0, 1.0, 1.0, 0.9)
+        ax_d.imshow(overlay, interpolation="nearest")
+        ax_d.set_title(f"{split} #{scene.index}: {len(scene.boxes)} boxes", fontsize=8)
+        ax_m.imshow(_mask_rgb(scene.mask), interpolation="nearest")
+        ax_m.set_title("instance mask", fontsize=8)
+    cb = fig.colorbar(im, ax=axes.ravel().tolist(), shrink=0.9)
+    cb.set_label("depth (m)")
+    fig.suptitle(f"Sample depth images ({split} split; grey = no data, white = box outlines)",
+                 fontsize=9)
+    _save(fig, path)
+    return split, n
+
+
+def figure_boxes_per_scene(splits: dict[str, dict], max_count: int, path: Path) -> None:
+    """Stacked histogram of boxes per scene, from the manifest's per-split histograms."""
+    fig = Figure(figsize=(6.4, 3.6), dpi=FIG_DPI, layout="constrained")
+    ax = fig.subplots()
+    x = np.arange(max_count + 1)
+    bottom = np.zeros(max_count + 1)
+    drawn = False
+    for split, colour in zip(SPLITS, ("tab:blue", "tab:orange", "tab:green")):
+        hist = splits[split].get("boxes_per_scene_histogram")
+        if not hist:
+            continue
+        h = np.zeros(max_count + 1)
+        h[:min(len(hist), max_count + 1)] = hist[:max_count + 1]
+        ax.bar(x, h, bottom=bottom, color=colour, label=f"{split} ({splits[split]['scenes']})",
+               width=0.85)
+        bottom += h
+        drawn = True
+    ax.set_xlabel("boxes at rest in the bin per scene")
+    ax.set_ylabel("scenes")
+    ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set_xticks(x[::2] if max_count > 10 else x)
+    ax.set_xlim(-0.6, max_count + 0.6)
+    if drawn:
+        ax.legend(title="split (scenes)", fontsize=8)
+    else:
+        ax.text(0.5, 0.5, "no scenes", transform=ax.transAxes, ha="center")
+    ax.set_title("Boxes per scene (all splits, stacked)", fontsize=10)
+    _save(fig, path)
+
+
+def figure_labels_sample(gen_dir: Path, label_dir: Path, num: int, path: Path
+                         ) -> tuple[str | None, int]:
+    """Depth images with their grasp points coloured by final class (like the paper's Fig. 4f).
+
+    Draws the first ``num`` scenes of the test split (else train, else val) with the labels of
+    the label artifact ``label_dir``; returns (split, images drawn).
+    """
+    from matplotlib.lines import Line2D
+
+    split = sample_split(gen_dir)
+    n = min(num, len(SceneDataset(gen_dir, split))) if split else 0
+    if n == 0:
+        fig = Figure(figsize=(6.0, 2.0), dpi=FIG_DPI)
+        fig.text(0.5, 0.5, "no labelled scenes", ha="center", va="center")
+        _save(fig, path)
+        return split, 0
+    ds, ls = SceneDataset(gen_dir, split), LabelSet(label_dir, split)
+    scenes = [ds[i] for i in range(n)]
+    valid = np.concatenate([s.depth_m[s.depth_m > 0] for s in scenes])
+    vmin, vmax = (float(valid.min()), float(valid.max())) if valid.size else (0.0, 1.0)
+    if vmax <= vmin:
+        vmax = vmin + 1e-3
+    per_row = min(3, n)
+    rows = math.ceil(n / per_row)
+    fig = Figure(figsize=(3.3 * per_row, 3.3 * rows + 0.9), dpi=FIG_DPI, layout="constrained")
+    axes = fig.subplots(rows, per_row, squeeze=False)
+    cmap = matplotlib.colormaps["gray_r"].with_extremes(bad=NO_DATA)  # near = light
+    colours = {c: tuple(v / 255 for v in CLASS_COLORS[c]) for c in GraspClass}
+    totals = np.zeros(len(GraspClass), dtype=np.int64)
+    for ax in axes.ravel():
+        ax.set_axis_off()
+    for i, scene in enumerate(scenes):
+        ax = axes.ravel()[i]
+        rows_i = ls[i]
+        uv, cls = rows_i["uv"], rows_i["grasp_class"].astype(np.int64)
+        totals += np.bincount(cls, minlength=len(GraspClass))
+        H, W = scene.depth_m.shape
+        ax.imshow(np.where(scene.depth_m > 0, scene.depth_m, np.nan), cmap=cmap, vmin=vmin,
+                  vmax=vmax, interpolation="nearest")
+        for c in GraspClass:
+            sel = cls == c
+            if sel.any():
+                ax.scatter(uv[sel, 0], uv[sel, 1], s=26, color=colours[c], edgecolors="black",
+                           linewidths=0.6, zorder=3)
+        ax.set_xlim(-0.5, W - 0.5)
+        ax.set_ylim(H - 0.5, -0.5)
+        ax.set_title(f"{split} #{scene.index}: {len(cls)} grasp points", fontsize=8)
+    handles = [Line2D([], [], linestyle="", marker="o", markersize=7, color=colours[c],
+                      markeredgecolor="black", label=f"{c.name}: {CLASS_MEANING[c]} ({totals[c]})")
+               for c in GraspClass]
+    fig.legend(handles=handles, loc="outside lower center", ncols=len(handles), fontsize=8,
+               title="class after the robot-level check (grasp points drawn)", title_fontsize=8)
+    fig.suptitle(f"Grasp points on {split} depth images "
+                 "(light = near, dark = far, brown = no data)", fontsize=9)
+    _save(fig, path)
+    return split, n
