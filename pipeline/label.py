@@ -254,7 +254,33 @@ class LabelSet:
         return {key: v[a:b] for key, v in arrays.items() if key != "points_per_scene"}
 
 
-def _log_scene(log: StageLog, scene: Scene, rows: dict, log_index: int) -> None:
+ROBOT_SAMPLE_SCENES = 10  # logged scenes that also show the robot at a target pose
+
+
+def _log_robot_sample(log: StageLog, scene: Scene, rows: dict, robot) -> None:
+    """The robot at the target pose of the scene's first graspable point (Fig. 4e): its link
+    origins as a skeleton of points and the target camera as a frustum."""
+    from pipeline.robot.target_pose import target_camera_pose
+
+    graspable = np.nonzero(rows["grasp_class"] != GraspClass.NG)[0]
+    if len(graspable) == 0:
+        log.log_points("world/robot/links", np.zeros((0, 3), np.float32), frame_id="world")
+        return
+    i = int(graspable[0])
+    robot.set_scene(scene)
+    T = scene.T_world_cam @ target_camera_pose(
+        rows["center_cam"][i].astype(np.float64), rows["normal_cam"][i].astype(np.float64),
+        rows["x_axis_cam"][i].astype(np.float64), GraspClass(int(rows["grasp_class"][i])).name,
+        standoff=robot.cfg.hand.standoff, cup_offset=robot.cfg.hand.cup_offset)
+    result = robot.robot.solve_ik(T, seed_q=robot.robot.home_q(), obstacle_ids=robot.obstacles,
+                                  ignore_body_ids=[robot.box_bodies[int(rows["instance"][i])]])
+    names = sorted(robot.robot.link_index, key=robot.robot.link_index.get)
+    links = np.array([robot.robot.link_pose(n, result.q)[:3, 3] for n in names], np.float32)
+    log.log_points("world/robot/links", links, frame_id="world")
+    log.log_camera("world/robot/target_camera", scene.intrinsics, T, frame_id="target_camera")
+
+
+def _log_scene(log: StageLog, scene: Scene, rows: dict, log_index: int, robot=None) -> None:
     log.set_time(sequences={"scene": log_index}, clock_ns=log_index * 1_000_000_000)
     log.log_camera("world/camera", scene.intrinsics, scene.T_world_cam)
     log.log_depth("world/camera/depth", scene.depth_m)
@@ -267,6 +293,8 @@ def _log_scene(log: StageLog, scene: Scene, rows: dict, log_index: int) -> None:
     sizes = np.column_stack([rows["lengths"], np.full(n, 0.001)]).reshape(-1, 3)
     log.log_boxes("world/camera/surfaces", rows["center_cam"].reshape(-1, 3), sizes, quats,
                   labels=[c.name for c in classes], frame_id="camera")
+    if robot is not None:
+        _log_robot_sample(log, scene, rows, robot)
     counts = np.bincount(rows["grasp_class"], minlength=4)
     log.log_text("log", f"{scene.split} scene {scene.index}: {n} grasp points; "
                         + ", ".join(f"{c.name} {counts[c]}" for c in GraspClass))
@@ -334,13 +362,18 @@ def label(cfg: DictConfig) -> Path:
         total = max(sum(sizes.values()), 1)
         quota = {s: min(n, math.ceil(cfg_obj.logging.max_logged_scenes * n / total))
                  for s, n in sizes.items()}
+        checker = None
+        if cfg_obj.label.robot_checks:
+            from pipeline.labelling.robot_check import RobotChecker
+            checker = RobotChecker(cfg_obj)
         with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version,
                       blueprint=default_blueprint()) as log:
             log_index = 0
             for split in SPLITS:
                 ds, labels = SceneDataset(gen_dir, split), LabelSet(run.work_dir, split)
                 for i in range(quota[split]):
-                    _log_scene(log, ds[i], labels[i], log_index)
+                    sample = checker if log_index < ROBOT_SAMPLE_SCENES else None
+                    _log_scene(log, ds[i], labels[i], log_index, sample)
                     log_index += 1
         run.metrics["logged_scenes"] = log_index
 

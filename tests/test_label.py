@@ -77,7 +77,7 @@ def test_label_logs(labelled):
     _, _, folder = labelled
     entities = rrd_entity_paths(folder / "log.rrd")
     assert {"/world/camera/depth", "/world/camera/grasp_points",
-            "/world/camera/surfaces"} <= entities
+            "/world/camera/surfaces", "/world/robot/links", "/world/robot/target_camera"} <= entities
     counts = mcap_message_counts(folder / "log.mcap")
     assert counts["/world/camera/depth"] == 5 and counts["/world/camera/grasp_points"] == 5
 

@@ -16,6 +16,11 @@ of its points), its sides give L_l and L_s. Because the samples are pixel centre
 rectangle can be up to one pixel footprint (about 1.5 mm at 0.6 m) shorter than the region
 along an image-aligned side; the centre has no such bias. Detection and ground truth use the
 same computation, so they are comparable.
+
+Axis signs: ``long_axis_cam`` has a camera-x component ≥ 0 (it points right in the image; when
+that component is 0, its y component is ≥ 0, pointing down), and ``short_axis_cam = normal ×
+long``, so (long, short, normal) is right-handed. For a square face the long side is whichever
+side the samples make longer.
 """
 
 from __future__ import annotations
@@ -48,6 +53,11 @@ class SurfaceDetectionConfig:
         ransac_n: points per RANSAC hypothesis.
         num_iterations: RANSAC hypotheses per plane.
         min_inliers: fewest pixels a surface's connected region may have.
+        search_min_inliers: the plane search goes on while this many points are left and ends
+            at a plane with fewer inliers. Lower than ``min_inliers`` because the planes found
+            first take the pixels of later faces that lie within ``distance_threshold`` of them
+            (along shared edges: a side face seen at a grazing angle can lose a whole pixel
+            column, a third of its pixels); the final nearest-plane assignment gives them back.
         max_surfaces_per_object: planes searched per object cluster (a box shows at most 3 faces).
         seed: base seed of RANSAC; each object's searches are seeded from (seed, instance), so
             a result does not depend on the order or number of earlier calls.
@@ -59,8 +69,8 @@ class SurfaceDetectionConfig:
             planes in 50 identical calls on one box's points; after refinement 1–5 of ~400
             surfaces differ between processes on noisy depth). The numpy version draws its
             hypotheses from a seeded ``np.random.Generator`` and is bitwise reproducible.
-        ransac_max_points: RANSAC runs on an evenly strided subsample of at most this many points;
-            the plane is then refined on all points (the final geometry never uses the sample).
+        ransac_max_points: RANSAC runs on a random subsample of at most this many points; the
+            plane is then refined on all points (the final geometry never uses the sample).
         refine_iterations: at most this many least-squares refits (inliers → plane → inliers)
             after RANSAC; stops earlier when the inliers no longer change.
         connectivity: 4 or 8, pixel connectivity of the visible region; 4 keeps regions that touch
@@ -71,6 +81,7 @@ class SurfaceDetectionConfig:
     ransac_n: int = 3
     num_iterations: int = 200
     min_inliers: int = 150
+    search_min_inliers: int = 75
     max_surfaces_per_object: int = 3
     seed: int = 0
     ransac_backend: str = "numpy"
@@ -314,10 +325,15 @@ def _find_planes(points: np.ndarray, cfg: SurfaceDetectionConfig, instance: int)
     left = len(points)
     planes: list[_Plane] = []
     rng = np.random.default_rng([int(cfg.seed), instance])  # depends only on (seed, instance)
-    while len(planes) < cfg.max_surfaces_per_object and left >= cfg.min_inliers:
+    while len(planes) < cfg.max_surfaces_per_object and left >= cfg.search_min_inliers:
         rest = np.flatnonzero(remaining)
-        stride = -(-left // cfg.ransac_max_points)  # ceil
-        sample = points[rest[::stride]]
+        # A random subsample, not a strided one: a stride in row-major order aliases with thin
+        # image strips (a side face seen at a grazing angle is 2–3 pixels wide, each pixel
+        # column at its own depth), which favours planes through single pixel columns.
+        if left > cfg.ransac_max_points:
+            sample = points[rest[rng.choice(left, cfg.ransac_max_points, replace=False)]]
+        else:
+            sample = points[rest]
         # Shortcut: if every remaining point lies within the threshold of their least-squares
         # plane (one face left, e.g. a box lying flat), RANSAC and its refinement would end at
         # that same plane and inlier set; skip them. Tried on the sample first (cheaper).
@@ -350,7 +366,7 @@ def _find_planes(points: np.ndarray, cfg: SurfaceDetectionConfig, instance: int)
                 axes = (e1, e2)
                 break
             inliers, count = new, new_count
-        if count < cfg.min_inliers:
+        if count < cfg.search_min_inliers:
             break
         planes.append(_Plane(n, c, inliers, axes))
         remaining &= ~inliers
@@ -367,10 +383,10 @@ def detect_surfaces(depth_m: np.ndarray, mask: np.ndarray, intrinsics: Intrinsic
     that crop that a simulator gives for free (no tuning of crop boxes, no leaks between
     touching boxes), which keeps label errors down to the surface fit itself.
 
-    Per cluster: RANSAC on a strided subsample (a seeded numpy implementation by default, or
+    Per cluster: RANSAC on a random subsample (a seeded numpy implementation by default, or
     open3d's ``segment_plane``, see ``SurfaceDetectionConfig.ransac_backend``), least-squares
     refits on all the cluster's points until the inliers stop changing, removal of the inliers;
-    repeated until fewer than ``min_inliers`` points remain or ``max_surfaces_per_object``
+    repeated until fewer than ``search_min_inliers`` points remain or ``max_surfaces_per_object``
     planes are found (when all remaining points already lie on one plane, that plane is taken
     without RANSAC). Each cluster
     point is then assigned to its nearest plane (if within ``distance_threshold``), so that
