@@ -112,6 +112,7 @@ def _init_worker(cfg_obj, gen_dir: str) -> None:
 def surface_config(cfg) -> SurfaceDetectionConfig:
     s = cfg.surfaces
     return SurfaceDetectionConfig(distance_threshold=s.distance_threshold, ransac_n=s.ransac_n,
+                                  ransac_backend=s.ransac_backend,
                                   num_iterations=s.num_iterations, min_inliers=s.min_inliers,
                                   max_surfaces_per_object=s.max_surfaces_per_object)
 

@@ -149,6 +149,7 @@ class SurfaceConfig:
     """Surface detection by RANSAC plane fits on per-object point clusters."""
 
     distance_threshold: float = 0.002  # RANSAC inlier distance, m
+    ransac_backend: str = "numpy"  # "numpy" (seeded, deterministic) or "open3d" (segment_plane)
     ransac_n: int = 3
     num_iterations: int = 200
     min_inliers: int = 150  # fewer points: not a surface
