@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import json
 import math
-import multiprocessing as mp
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,7 +22,6 @@ from pathlib import Path
 import hydra
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
-from tqdm import tqdm
 
 from pipeline.artifacts import compute_version, run_stage, stage_config
 from pipeline.artifacts.store import StageRun
@@ -33,6 +31,7 @@ from pipeline.camera.geometry import (
 from pipeline.cli import CONF_DIR, data_root, default_workers, stage_main
 from pipeline.dataset.scenes import SPLIT_CODES, SPLITS, SceneDataset
 from pipeline.dataset.storage import write_npz
+from pipeline.executor import log_quota, map_shards
 from pipeline.simulation.scene import connect, scene_rng, simulate_scene
 from pipeline.tracking import StageLog, default_blueprint
 
@@ -149,32 +148,8 @@ def generate_shard(task: ShardTask) -> ShardSummary:
 
 def run_shards(tasks: list[ShardTask], cfg_obj, workers: int, progress: bool = True):
     """Yield each shard's summary in task order, computed by ``workers`` processes."""
-    total = sum(t.count for t in tasks)
-    bar = tqdm(total=total, unit="scene", desc=STAGE, disable=not progress, smoothing=0.1)
-    try:
-        if workers <= 1:
-            _init_worker(cfg_obj)
-            for task in tasks:
-                summary = generate_shard(task)
-                bar.update(task.count)
-                yield summary
-            return
-        # fork: workers start in milliseconds and callers need no `if __name__ == "__main__"`
-        # guard. Safe here because no log stream or pybullet client is open in the parent yet.
-        ctx = mp.get_context("fork")
-        with ctx.Pool(workers, initializer=_init_worker, initargs=(cfg_obj,)) as pool:
-            for summary in pool.imap(generate_shard, tasks, chunksize=1):
-                bar.update(summary.task.count)
-                yield summary
-    finally:
-        bar.close()
-
-
-def _log_quota(sizes: dict[str, int], max_logged: int) -> dict[str, int]:
-    total = sum(sizes.values())
-    if total == 0:
-        return {s: 0 for s in sizes}
-    return {s: min(n, math.ceil(max_logged * n / total)) for s, n in sizes.items()}
+    return map_shards(generate_shard, tasks, init=_init_worker, initargs=(cfg_obj,),
+                      workers=workers, desc=STAGE, progress=progress)
 
 
 def _log_static(log: StageLog, cfg_obj) -> None:
@@ -266,7 +241,7 @@ def generate(cfg: DictConfig) -> Path:
         run.timings["scenes_per_s"] = round(n_total / max(run.timings["simulate_s"], 1e-9), 3)
 
         t1 = time.perf_counter()
-        quota = _log_quota(sizes, cfg_obj.logging.max_logged_scenes)
+        quota = log_quota(sizes, cfg_obj.logging.max_logged_scenes)
         with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version,
                       blueprint=default_blueprint()) as log:
             _log_static(log, cfg_obj)

@@ -26,8 +26,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
-import multiprocessing as mp
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,7 +33,6 @@ from pathlib import Path
 import hydra
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
-from tqdm import tqdm
 
 from pipeline.artifacts import compute_version, resolve_artifact, run_stage, stage_config
 from pipeline.artifacts.store import StageRun
@@ -43,6 +40,7 @@ from pipeline.camera.geometry import quat_from_matrix
 from pipeline.cli import CONF_DIR, data_root, default_workers, stage_main
 from pipeline.dataset.scenes import SPLITS, Scene, SceneDataset
 from pipeline.dataset.storage import read_npz, write_npz
+from pipeline.executor import log_quota, map_shards
 from pipeline.labelling.hand import hand_label
 from pipeline.labelling.surfaces import (
     SurfaceDetectionConfig, aggregate, detect_surfaces, match_surfaces, true_visible_faces,
@@ -208,23 +206,9 @@ def plan_tasks(gen_dir: Path, out_dir: Path) -> list[LabelTask]:
 
 
 def run_tasks(tasks, cfg_obj, gen_dir: Path, workers: int, progress: bool):
-    total = sum(t.count for t in tasks)
-    bar = tqdm(total=total, unit="scene", desc=STAGE, disable=not progress, smoothing=0.1)
-    try:
-        if workers <= 1:
-            _init_worker(cfg_obj, str(gen_dir))
-            for task in tasks:
-                s = label_shard(task)
-                bar.update(task.count)
-                yield s
-            return
-        ctx = mp.get_context("fork")  # see pipeline.generate.run_shards
-        with ctx.Pool(workers, initializer=_init_worker, initargs=(cfg_obj, str(gen_dir))) as pool:
-            for s in pool.imap(label_shard, tasks, chunksize=1):
-                bar.update(s.task.count)
-                yield s
-    finally:
-        bar.close()
+    """Yield each shard's summary in task order, computed by ``workers`` processes."""
+    return map_shards(label_shard, tasks, init=_init_worker, initargs=(cfg_obj, str(gen_dir)),
+                      workers=workers, desc=STAGE, progress=progress)
 
 
 class LabelSet:
@@ -360,9 +344,7 @@ def label(cfg: DictConfig) -> Path:
         run.metrics.update(metrics)
 
         sizes = {split: metrics["splits"][split]["scenes"] for split in SPLITS}
-        total = max(sum(sizes.values()), 1)
-        quota = {s: min(n, math.ceil(cfg_obj.logging.max_logged_scenes * n / total))
-                 for s, n in sizes.items()}
+        quota = log_quota(sizes, cfg_obj.logging.max_logged_scenes)
         checker = None
         if cfg_obj.label.robot_checks:
             from pipeline.labelling.robot_check import RobotChecker
