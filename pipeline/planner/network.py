@@ -106,7 +106,8 @@ class GraspNet(nn.Module):
         self.stage32, c, _ = self._stage(DARKNET19_TO_STRIDE32, c16, level)  # stride 32
 
         head = scaled(HEAD_CHANNELS, w)
-        self.head = nn.Sequential(ConvBlock(c, head, 3, slope, 5), ConvBlock(head, head, 3, slope, 5))
+        self.head = nn.Sequential(ConvBlock(c, head, 3, slope, 5),
+                                  ConvBlock(head, head, 3, slope, 5))
         self.passthrough = ConvBlock(c16, scaled(PASSTHROUGH_CHANNELS, w), 1, slope, 4)
         c_cat = head + 4 * scaled(PASSTHROUGH_CHANNELS, w)  # space-to-depth ×4 channels
         self.fuse = ConvBlock(c_cat, head, 3, slope, 5)

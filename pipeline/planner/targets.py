@@ -62,7 +62,8 @@ def encode(uv: np.ndarray, classes: np.ndarray, grid: int = 13,
     bad = (uv < -OUTSIDE_TOLERANCE_PX) | (uv > image_size + OUTSIDE_TOLERANCE_PX)
     if bad.any():
         raise ValueError(f"grasp points {uv[bad.any(1)].tolist()} lie outside the "
-                         f"{image_size}×{image_size} image; were the labels made for another size?")
+                         f"{image_size}×{image_size} image; were the labels made for "
+                         "another image size?")
     if np.any((classes < 0) | (classes >= len(GraspClass))):
         raise ValueError(f"classes must be in 0..{len(GraspClass) - 1}, got {np.unique(classes)}")
 

@@ -1,0 +1,154 @@
+"""Grasp point score ranking (paper Sec. 4.2, Eqs. 7–10).
+
+    J_i = J_distance     if φ < π/6,  else J_inclination                           (7)
+    φ = arccos(n^Z / |n|)                                                         (8)
+    J_distance = 1 − I(g^u, g^v) / D_ground                                       (9)
+    J_inclination = 1 − 2 φ / π                                                  (10)
+
+**Normal and φ.** The normal at g is Eq. 14's n_p = (P(u+1,v) − P(u−1,v)) × (P(u,v+1) −
+P(u,v−1)) on the back-projected depth image (camera frame, OpenCV), each n_p normalised and
+averaged over a (2h+1)² window around g, skipping pixels with no data or with a depth jump (an
+object edge) to a neighbour. For a surface facing the camera Eq. 14's cross product points
+*away* from it (+z for a level surface: x-right × y-down = z-forward), which is what makes Eq. 8
+give φ = 0 for a level surface. ``GraspCandidate.normal_cam`` is reported pointing *towards* the
+camera (n · P < 0, like the labels' ``normal_cam``), so with that n, φ = arccos(−n_z / |n|): the
+angle between −n (Eq. 14's orientation) and the camera's +Z axis. A level surface facing the
+camera has φ = 0, a surface seen edge-on φ = π/2.
+
+**Depth I(g).** The depth of the pixel nearest g; if it has no data, the median valid depth of
+the window. A candidate with no valid depth or normal in its window is dropped.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from pipeline.camera.geometry import Intrinsics, backproject
+from pipeline.labelling.types import GraspClass
+from pipeline.planner.decode import GraspPrediction
+
+
+@dataclass
+class RankingConfig:
+    d_ground: float  # D_ground, camera-to-ground distance at the home pose, metres (Eq. 9)
+    threshold: float = 0.5  # th of Eq. 3 (the paper gives no value)
+    phi_switch: float = math.pi / 6  # Eq. 7's switch from J_distance to J_inclination, rad
+    normal_half_window: int = 3  # h: the normal is averaged over (2h + 1)² pixels
+    max_depth_jump: float = 0.02  # m; a larger depth step to a neighbour marks an edge
+
+
+@dataclass
+class GraspCandidate:
+    """A scored grasp point. ``u``, ``v``: pixels; ``score``: J of Eq. 7; ``phi``: rad;
+    ``depth``: I(g), metres; ``normal_cam``: (3,) unit normal, camera frame, towards the camera;
+    ``j_distance``, ``j_inclination``: Eqs. 9 and 10 (both shown in the paper's Fig. 9)."""
+
+    u: float
+    v: float
+    grasp_class: GraspClass
+    probability: float
+    score: float
+    phi: float
+    depth: float
+    normal_cam: np.ndarray
+    j_distance: float
+    j_inclination: float
+
+
+def surface_normal(points_cam: np.ndarray, u: int, v: int, half_window: int,
+                   max_depth_jump: float) -> np.ndarray | None:
+    """Unit normal (3,) at pixel (u, v), pointing towards the camera, or None if no pixel of the
+    window is usable.
+
+    Args:
+        points_cam: (H, W, 3) back-projected depth image, camera frame, metres (z = 0: no data).
+        u, v: integer pixel.
+    """
+    H, W, _ = points_cam.shape
+    # The window plus the one-pixel ring its central differences read.
+    v0, v1 = max(v - half_window, 1), min(v + half_window, H - 2)
+    u0, u1 = max(u - half_window, 1), min(u + half_window, W - 2)
+    if v0 > v1 or u0 > u1:
+        return None
+    P = points_cam[v0 - 1:v1 + 2, u0 - 1:u1 + 2].astype(np.float64)  # (h+2, w+2, 3)
+    centre = P[1:-1, 1:-1]
+    left, right = P[1:-1, :-2], P[1:-1, 2:]
+    up, down = P[:-2, 1:-1], P[2:, 1:-1]
+    n = np.cross(right - left, down - up)  # (h, w, 3), Eq. 14: away from the camera
+    z = [a[..., 2] for a in (centre, left, right, up, down)]
+    valid = np.all([zi > 0 for zi in z], axis=0)
+    for zi in z[1:]:
+        valid &= np.abs(zi - z[0]) <= max_depth_jump
+    length = np.linalg.norm(n, axis=-1)
+    valid &= length > 0
+    if not valid.any():
+        return None
+    mean = (n[valid] / length[valid, None]).mean(0)
+    norm = np.linalg.norm(mean)
+    if norm == 0:
+        return None
+    mean /= norm
+    ray = points_cam[v, u] if points_cam[v, u, 2] > 0 else centre[valid][0]
+    return -mean if mean @ ray > 0 else mean  # towards the camera
+
+
+def inclination(normal_cam: np.ndarray) -> float:
+    """φ of Eq. 8 (rad) for a normal pointing towards the camera: the angle between −n and +Z."""
+    n = np.asarray(normal_cam, np.float64)
+    return float(np.arccos(np.clip(-n[2] / np.linalg.norm(n), -1.0, 1.0)))
+
+
+def graspability(depth: float, phi: float, d_ground: float,
+                 phi_switch: float = math.pi / 6) -> tuple[float, float, float]:
+    """Eqs. 7, 9, 10 → (J, J_distance, J_inclination)."""
+    j_distance = 1.0 - depth / d_ground
+    j_inclination = 1.0 - 2.0 * phi / math.pi
+    return (j_distance if phi < phi_switch else j_inclination), j_distance, j_inclination
+
+
+def rank_grasps(predictions: Sequence[GraspPrediction], depth_m: np.ndarray,
+                intrinsics: Intrinsics, cfg: RankingConfig) -> list[GraspCandidate]:
+    """Score and sort one image's predictions; G_opt is the first candidate.
+
+    Keeps predictions with ``probability > cfg.threshold`` (Eq. 3) whose class is not NG.
+
+    Args:
+        predictions: ``decode.decode_output`` output (any threshold).
+        depth_m: (H, W) float32 z-depth, metres, 0 = no data.
+        intrinsics: of ``depth_m``.
+
+    Returns:
+        candidates sorted by J descending (ties: higher probability first).
+    """
+    depth_m = np.asarray(depth_m, np.float32)
+    points = backproject(depth_m, intrinsics)  # (H, W, 3) camera frame
+    H, W = depth_m.shape
+    h = cfg.normal_half_window
+    out = []
+    for pred in predictions:
+        if pred.probability <= cfg.threshold or pred.grasp_class == GraspClass.NG:
+            continue
+        u = int(np.clip(round(pred.u), 0, W - 1))
+        v = int(np.clip(round(pred.v), 0, H - 1))
+        depth = float(depth_m[v, u])
+        if depth <= 0:
+            window = depth_m[max(v - h, 0):v + h + 1, max(u - h, 0):u + h + 1]
+            if not (window > 0).any():
+                continue
+            depth = float(np.median(window[window > 0]))
+        normal = surface_normal(points, u, v, h, cfg.max_depth_jump)
+        if normal is None:
+            continue
+        phi = inclination(normal)
+        score, j_distance, j_inclination = graspability(depth, phi, cfg.d_ground, cfg.phi_switch)
+        out.append(GraspCandidate(
+            u=float(pred.u), v=float(pred.v), grasp_class=GraspClass(pred.grasp_class),
+            probability=float(pred.probability), score=score, phi=phi, depth=depth,
+            normal_cam=normal.astype(np.float32), j_distance=j_distance,
+            j_inclination=j_inclination))
+    out.sort(key=lambda c: (-c.score, -c.probability))
+    return out
