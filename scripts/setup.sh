@@ -13,7 +13,7 @@ VENV=.venv
 STAMP=$VENV/.setup-stamp
 
 # --- 1. system library -------------------------------------------------------------------
-if ! ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0'; then
+if ! ldconfig -p 2>/dev/null | grep 'libusb-1.0.so.0' >/dev/null; then  # not -q: SIGPIPE + pipefail
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
     echo "[setup] installing Debian package libusb-1.0-0 (needed by open3d)"
     (apt-get install -y -qq libusb-1.0-0 >/dev/null 2>&1) || \
