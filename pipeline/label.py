@@ -115,8 +115,12 @@ def surface_config(cfg) -> SurfaceDetectionConfig:
                                   max_surfaces_per_object=s.max_surfaces_per_object)
 
 
-def label_scene(scene: Scene, cfg, robot=None) -> tuple[dict[str, np.ndarray], dict, float, float]:
-    """Grasp points of one scene: (rows, accuracy match record, surface seconds, robot seconds)."""
+def label_scene(scene: Scene, cfg, robot=None, bin_cfg=None
+                ) -> tuple[dict[str, np.ndarray], dict, float, float]:
+    """Grasp points of one scene: (rows, accuracy match record, surface seconds, robot seconds).
+
+    ``bin_cfg``: the bin the scene was generated in (robot-level collision checks).
+    """
     t0 = time.perf_counter()
     surfaces = detect_surfaces(scene.depth_m, scene.mask, scene.intrinsics, surface_config(cfg))
     truth = true_visible_faces(scene.depth_m, scene.mask, scene.intrinsics, scene.boxes,
@@ -126,7 +130,7 @@ def label_scene(scene: Scene, cfg, robot=None) -> tuple[dict[str, np.ndarray], d
     t1 = time.perf_counter()
     rows = []
     if robot is not None and surfaces:
-        robot.set_scene(scene)
+        robot.set_scene(scene, bin_cfg)
     H, W = scene.mask.shape
     for s in surfaces:
         hl = hand_label(s, cfg.hand)
@@ -173,7 +177,7 @@ def label_shard(task: LabelTask) -> LabelSummary:
     per_scene = []
     for index in range(task.first, task.first + task.count):
         scene = ds[index]
-        rows, match, ts, tr = label_scene(scene, cfg, _STATE.get("robot"))
+        rows, match, ts, tr = label_scene(scene, cfg, _STATE.get("robot"), ds.bin)
         summary.surface_s += ts
         summary.robot_s += tr
         summary.matches.append(match)
@@ -242,7 +246,7 @@ class LabelSet:
 ROBOT_SAMPLE_SCENES = 10  # logged scenes that also show the robot at a target pose
 
 
-def _log_robot_sample(log: StageLog, scene: Scene, rows: dict, robot) -> None:
+def _log_robot_sample(log: StageLog, scene: Scene, rows: dict, robot, bin_cfg) -> None:
     """The robot at the target pose of the scene's first graspable point (Fig. 4e): its link
     origins as a skeleton of points and the target camera as a frustum."""
     from pipeline.robot.target_pose import target_camera_pose
@@ -252,7 +256,7 @@ def _log_robot_sample(log: StageLog, scene: Scene, rows: dict, robot) -> None:
         log.log_points("world/robot/links", np.zeros((0, 3), np.float32), frame_id="world")
         return
     i = int(graspable[0])
-    robot.set_scene(scene)
+    robot.set_scene(scene, bin_cfg)
     T = scene.T_world_cam @ target_camera_pose(
         rows["center_cam"][i].astype(np.float64), rows["normal_cam"][i].astype(np.float64),
         rows["x_axis_cam"][i].astype(np.float64), GraspClass(int(rows["grasp_class"][i])).name,
@@ -265,7 +269,8 @@ def _log_robot_sample(log: StageLog, scene: Scene, rows: dict, robot) -> None:
     log.log_camera("world/robot/target_camera", scene.intrinsics, T, frame_id="target_camera")
 
 
-def _log_scene(log: StageLog, scene: Scene, rows: dict, log_index: int, robot=None) -> None:
+def _log_scene(log: StageLog, scene: Scene, rows: dict, log_index: int, robot=None,
+               bin_cfg=None) -> None:
     log.set_time(sequences={"scene": log_index}, clock_ns=log_index * 1_000_000_000)
     log.log_camera("world/camera", scene.intrinsics, scene.T_world_cam)
     log.log_depth("world/camera/depth", scene.depth_m)
@@ -279,7 +284,7 @@ def _log_scene(log: StageLog, scene: Scene, rows: dict, log_index: int, robot=No
     log.log_boxes("world/camera/surfaces", rows["center_cam"].reshape(-1, 3), sizes, quats,
                   labels=[c.name for c in classes], frame_id="camera")
     if robot is not None:
-        _log_robot_sample(log, scene, rows, robot)
+        _log_robot_sample(log, scene, rows, robot, bin_cfg)
     counts = np.bincount(rows["grasp_class"], minlength=4)
     log.log_text("log", f"{scene.split} scene {scene.index}: {n} grasp points; "
                         + ", ".join(f"{c.name} {counts[c]}" for c in GraspClass))
@@ -297,7 +302,7 @@ def _quat_from_axes(x, y, z) -> np.ndarray:
 def label(cfg: DictConfig) -> Path:
     """Run the labelling stage on a generation artifact; returns the label artifact folder."""
     gen_dir = resolve_artifact(data_root(cfg), "generate", cfg.label.generate_version)
-    config = stage_config(cfg, [s for s in SECTIONS if s in cfg], NOT_AFFECTING_RESULT)
+    config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
     version = compute_version(STAGE, config, upstream={"generate": gen_dir.name})
     cfg_obj = OmegaConf.to_object(cfg)
     workers = default_workers(cfg_obj.label.workers)
@@ -356,7 +361,7 @@ def label(cfg: DictConfig) -> Path:
                 ds, labels = SceneDataset(gen_dir, split), LabelSet(run.work_dir, split)
                 for i in range(quota[split]):
                     sample = checker if log_index < ROBOT_SAMPLE_SCENES else None
-                    _log_scene(log, ds[i], labels[i], log_index, sample)
+                    _log_scene(log, ds[i], labels[i], log_index, sample, ds.bin)
                     log_index += 1
         run.metrics["logged_scenes"] = log_index
 

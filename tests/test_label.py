@@ -115,3 +115,21 @@ def test_label_without_generation_says_what_to_do(tmp_path):
 
     with pytest.raises(ArtifactError, match="make generate"):
         label(_cfg("label", tmp_path))
+
+
+def test_robot_checks_use_the_generated_bin(tmp_path):
+    """Labels must check collisions against the bin the scenes were generated in, even when the
+    label command's own config names another bin."""
+    import pybullet as p
+    from omegaconf import OmegaConf
+
+    from pipeline.labelling.robot_check import RobotChecker
+
+    gen = generate(_cfg("generate", tmp_path, "bin.wall_height=0.10"))
+    ds = SceneDataset(gen, "train")
+    assert ds.bin.wall_height == pytest.approx(0.10)
+    checker = RobotChecker(OmegaConf.to_object(compose("label", ["experiment=smoke"])))
+    checker.set_scene(ds[0], ds.bin)
+    wall = checker.obstacles[2]  # build_cell order: ground, floor, walls
+    top = p.getAABB(wall, physicsClientId=checker.client)[1][2]
+    assert top == pytest.approx(0.10, abs=0.002)

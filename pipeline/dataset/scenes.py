@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
+from types import SimpleNamespace
 from pathlib import Path
 
 import numpy as np
@@ -102,6 +103,8 @@ class SceneDataset:
         self.T_world_cam = np.asarray(self.meta["T_world_cam"], dtype=np.float64)
         self.depth_unit = float(self.meta["depth_unit"])
         self.box_types = self.meta["box_types"]
+        # The bin the scenes were generated in (same fields as ``conf/bin/*.yaml``).
+        self.bin = SimpleNamespace(**self.meta["bin"])
         self._shards = index["splits"][split]  # [{"file": ..., "first": i0, "count": n}, ...]
         self._starts = np.array([s["first"] for s in self._shards], dtype=np.int64)
         self._len = int(sum(s["count"] for s in self._shards))

@@ -56,10 +56,15 @@ class RobotChecker:
         self.robot = Robot(robot_config(cfg))
         self._scene = None
 
-    def set_scene(self, scene: Scene) -> None:
-        """Rebuild the cell with the scene's boxes as static obstacles at their true poses."""
+    def set_scene(self, scene: Scene, bin_cfg=None) -> None:
+        """Rebuild the cell with the scene's boxes as static obstacles at their true poses.
+
+        ``bin_cfg``: the bin the scene was generated with (``SceneDataset.bin``); defaults to
+        the pipeline config's ``bin``.
+        """
         cfg = self.cfg
-        cell = build_cell(self.client, cfg.bin, cfg.physics)
+        bin_cfg = bin_cfg or cfg.bin
+        cell = build_cell(self.client, bin_cfg, cfg.physics)
         self.box_bodies: dict[int, int] = {}
         for box in scene.boxes:
             half = (np.asarray(box.size) / 2).tolist()
@@ -69,7 +74,7 @@ class RobotChecker:
                                      baseOrientation=quat_from_matrix(T[:3, :3]).tolist(),
                                      physicsClientId=self.client)
             self.box_bodies[box.instance] = body
-        self.robot.load(self.client, ground_z=-cfg.bin.floor_thickness)
+        self.robot.load(self.client, ground_z=-bin_cfg.floor_thickness)
         self.obstacles = list(cell) + list(self.box_bodies.values())
         self.T_world_cam = scene.T_world_cam
         self._scene = scene
