@@ -191,6 +191,43 @@ class LabelConfig:
 
 
 @dataclass
+class ModelConfig:
+    """The grasp-point DCNN (``pipeline.planner.network.NetworkConfig`` documents each field)."""
+
+    name: str = "darknet23"
+    width: float = 1.0  # channel multiplier on Darknet-19 widths (1.0 = the paper's network)
+    grid: int = 13  # N
+    input_size: int = 416
+    num_classes: int = 4
+    leaky_slope: float = 0.1
+
+
+@dataclass
+class TrainConfig:
+    """The training stage (``pipeline.train``) and what it stores for the planner."""
+
+    label_version: str = "latest"
+    epochs: int = MISSING
+    batch_size: int = 16  # paper Sec. 6
+    lr: float = 1.0e-4  # Adam, paper Sec. 6
+    betas: List[float] = field(default_factory=lambda: [0.9, 0.999])
+    alpha: float = 0.25  # focal loss, Sec. 4.1
+    gamma: float = 2.0
+    lambda_coord: float = 1.0
+    lambda_class: float = 1.0
+    depth_scale: float = 0.1  # m: input = (depth - D_ground) / depth_scale
+    missing_depth_value: float = 0.5  # network input where depth = 0 (no data)
+    augment_flip: str = "none"  # "none" | "u" (horizontal) | "v" (vertical) | "uv"
+    max_train_images: int = 0  # 0 = the whole train split
+    threshold: float = 0.5  # th of Eq. 3, stored with the model for the planner
+    match_radius_px: float = 16.0  # Table 1: a prediction within this of a same-class truth
+    num_threads: int = 2  # torch CPU threads (fixed: results depend on it)
+    device: str = "auto"  # "auto" (CUDA when available) | "cpu" | "cuda"
+    log_samples: int = 4  # test images logged with their predictions
+    force: bool = False
+
+
+@dataclass
 class ReportConfig:
     """The report stage: which artifacts to gather and how many sample images to draw."""
 
@@ -226,6 +263,8 @@ class PipelineConfig:
     surfaces: SurfaceConfig = field(default_factory=SurfaceConfig)
     label: LabelConfig = field(default_factory=LabelConfig)
     report: ReportConfig = field(default_factory=ReportConfig)
+    model: ModelConfig = field(default_factory=ModelConfig)
+    train: TrainConfig = field(default_factory=TrainConfig)
     logging: LoggingConfig = field(default_factory=LoggingConfig)
 
 

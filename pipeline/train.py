@@ -1,0 +1,346 @@
+"""The training stage (paper Sec. 4.1, Sec. 6): the grasp-point DCNN on a label artifact.
+
+    python -m pipeline.train experiment=smoke [train.label_version=<version>] [train.epochs=2]
+
+Upstream: the label artifact (``train.label_version``, default latest) and the generation
+artifact it names. Output: ``models/train/<version>/`` with
+
+* ``model.pt``: final weights, network config, depth normalisation and ranking config (th,
+  D_ground): what ``pipeline.planner.Planner.load`` reads; ``torch.load(weights_only=True)``.
+* ``checkpoint.pt``: the last checkpoint (weights, Adam state, config, epoch, history).
+* ``pr_curve.csv``: the precision–recall curve on the test split (``planner.evaluate``).
+* ``log.rrd`` / ``log.mcap``: loss per step (``step`` timeline) and per epoch (``epoch``
+  timeline), validation loss, Table 1, and sample test predictions on their depth images.
+* manifest metrics: parameters, FLOPs (MACs), points lost to the one-point-per-cell rule,
+  train/val loss per epoch, Table 1, a downsampled PR curve, training images/s.
+
+Optimiser (Sec. 6): Adam, lr 1e-4, betas (0.9, 0.999), batch 16; loss (Eqs. 4–6): λ = 1,
+α = 0.25, γ = 2. Depth normalisation: ``pipeline.planner.data``. Augmentation: none by default
+(``train.augment_flip``, see ``pipeline.planner.augment``).
+
+Determinism: weights are initialised from ``torch.manual_seed(seed)``; the data order and flips
+of epoch e come from a generator seeded by (seed, e); CPU threads are fixed
+(``train.num_threads``) and ``torch.use_deterministic_algorithms(True)``. Two CPU runs with the
+same config write byte-identical ``model.pt``. On CUDA, max-pool backward has no deterministic
+kernel, so GPU runs are repeatable only approximately (the device is part of the version).
+
+Resuming: after every epoch the checkpoint is written to ``models/train/.resume-<key>/``, key =
+the version without ``train.epochs``; a run that finds it continues from its epoch, so a killed
+run loses at most one epoch and ``train.epochs=<more>`` extends a finished run. Because the
+epoch's data order depends only on (seed, epoch) and the per-step losses live in the checkpoint,
+a resumed run writes the same ``model.pt`` and logs as an uninterrupted one. The folder is kept
+after success (delete it to start over).
+"""
+
+from __future__ import annotations
+
+import copy
+import csv
+import dataclasses
+import math
+import os
+import time
+from pathlib import Path
+
+import hydra
+import numpy as np
+import torch
+from omegaconf import DictConfig, OmegaConf
+from tqdm import tqdm
+
+from pipeline.artifacts import compute_version, load_manifest, resolve_artifact, run_stage, stage_config
+from pipeline.artifacts.store import StageRun
+from pipeline.camera.geometry import backproject
+from pipeline.cli import CONF_DIR, data_root, stage_main
+from pipeline.label import CLASS_COLORS, LabelSet
+from pipeline.labelling.types import GraspClass
+from pipeline.planner.augment import FLIPS
+from pipeline.planner.data import GraspDataset, Normalisation
+from pipeline.planner.decode import decode_output
+from pipeline.planner.evaluate import ImagePredictions, downsample_curve, precision_table
+from pipeline.planner.loss import LossConfig, grasp_loss
+from pipeline.planner.network import GraspNet, NetworkConfig, count_flops, count_parameters
+from pipeline.planner.planner import MODEL_FILE, Planner, pick_device, ranking_config
+from pipeline.tracking import StageLog
+
+STAGE = "train"
+SECTIONS = ("seed", "model", "train", "camera", "bin", "hand")
+NOT_AFFECTING_RESULT = ("train.label_version", "train.force", "train.device", "train.log_samples")
+CHECKPOINT = "checkpoint.pt"
+RESUME_PREFIX = ".resume-"
+EVAL_BATCH = 16
+
+
+def network_config(cfg) -> NetworkConfig:
+    m = cfg.model
+    return NetworkConfig(width=float(m.width), grid=int(m.grid), input_size=int(m.input_size),
+                         num_classes=int(m.num_classes), leaky_slope=float(m.leaky_slope))
+
+
+def normalisation(cfg) -> Normalisation:
+    d_ground = float(cfg.camera.height_above_bin_floor + cfg.bin.floor_thickness)
+    return Normalisation(d_ground, float(cfg.train.depth_scale),
+                         float(cfg.train.missing_depth_value))
+
+
+def epoch_order(n: int, seed: int, epoch: int, flip: str) -> tuple[list[int], list[str]]:
+    """Epoch ``epoch``'s image order and per-image flips, from (seed, epoch) only."""
+    gen = torch.Generator().manual_seed(seed * 1_000_003 + epoch)
+    order = torch.randperm(n, generator=gen).tolist()
+    choices = {"none": ["none"], "u": ["none", "u"], "v": ["none", "v"],
+               "uv": ["none", "u", "v", "uv"]}[flip]
+    picks = torch.randint(len(choices), (n,), generator=gen).tolist()
+    return order, [choices[k] for k in picks]
+
+
+def _save_atomic(obj, path: Path) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".part")
+    torch.save(obj, tmp)
+    os.replace(tmp, path)
+
+
+def _cpu_state(module_or_opt) -> dict:
+    state = module_or_opt.state_dict()
+
+    def to_cpu(v):
+        if isinstance(v, torch.Tensor):
+            return v.detach().cpu().clone()
+        if isinstance(v, dict):
+            return {k: to_cpu(x) for k, x in v.items()}
+        if isinstance(v, list):
+            return [to_cpu(x) for x in v]
+        return v
+    return to_cpu(state)
+
+
+@torch.no_grad()
+def evaluate_loss(net, data: GraspDataset, loss_cfg: LossConfig, device) -> float:
+    """Mean per-image loss over a split (eval mode)."""
+    if len(data) == 0:
+        return float("nan")
+    net.eval()
+    total = 0.0
+    for start in range(0, len(data), EVAL_BATCH):
+        idx = list(range(start, min(start + EVAL_BATCH, len(data))))
+        x, targets = data.batch(idx)
+        loss = grasp_loss(net(x.to(device)), targets, loss_cfg)
+        total += float(loss["total"]) * len(idx)
+    return total / len(data)
+
+
+@torch.no_grad()
+def table1(planner: Planner, data: GraspDataset, radius_px: float) -> dict:
+    """Table 1 on a split: every cell a prediction (``planner.evaluate``)."""
+    images = []
+    for start in range(0, len(data), EVAL_BATCH):
+        idx = list(range(start, min(start + EVAL_BATCH, len(data))))
+        raw = planner.predict(np.stack([data.depth_m(i) for i in idx]))
+        for k, i in enumerate(idx):
+            preds = decode_output(raw[k], threshold=-1.0, image_size=planner.size)
+            rows = data.rows[i]
+            images.append(ImagePredictions(
+                uv=np.array([[p.u, p.v] for p in preds], np.float64).reshape(-1, 2),
+                classes=np.array([int(p.grasp_class) for p in preds], np.int64),
+                scores=np.array([p.probability for p in preds], np.float64),
+                gt_uv=rows["uv"], gt_classes=rows["grasp_class"]))
+    return precision_table(images, radius_px)
+
+
+def _log_history(log: StageLog, history: dict, steps_per_epoch: int) -> None:
+    for step, (t, c, k) in enumerate(zip(history["step_total"], history["step_coord"],
+                                         history["step_class"])):
+        log.set_time(sequences={"step": step}, clock_ns=step * 1_000_000)
+        log.log_scalar("train/step/loss", t)
+        log.log_scalar("train/step/coord", c)
+        log.log_scalar("train/step/class", k)
+    for e, (tr, va) in enumerate(zip(history["train_loss"], history["val_loss"])):
+        step = (e + 1) * steps_per_epoch
+        log.set_time(sequences={"epoch": e + 1, "step": step}, clock_ns=step * 1_000_000)
+        log.log_scalar("train/epoch/loss", tr)
+        if math.isfinite(va):
+            log.log_scalar("val/epoch/loss", va)
+
+
+def _log_samples(log: StageLog, planner: Planner, data: GraspDataset, count: int,
+                 start_ns: int) -> None:
+    """Test images with the planner's ranked candidates (coloured by class) and the truth."""
+    for k in range(min(count, len(data))):
+        depth = data.depth_m(k)
+        log.set_time(sequences={"sample": k}, clock_ns=start_ns + k * 1_000_000_000)
+        log.log_depth("samples/camera/depth", depth)
+        points = backproject(depth, data.intrinsics)  # (H, W, 3) camera frame
+
+        def at(uv):
+            uv = np.asarray(uv, np.float64).reshape(-1, 2)
+            u = np.clip(np.round(uv[:, 0]).astype(int), 0, depth.shape[1] - 1)
+            v = np.clip(np.round(uv[:, 1]).astype(int), 0, depth.shape[0] - 1)
+            return points[v, u].astype(np.float32)
+
+        cands = planner.plan(depth, data.intrinsics)
+        colors = np.array([CLASS_COLORS[c.grasp_class] for c in cands], np.uint8).reshape(-1, 3)
+        log.log_points("samples/camera/predicted", at([[c.u, c.v] for c in cands]), colors)
+        rows = data.rows[k]
+        gt_colors = np.array([CLASS_COLORS[GraspClass(int(c))] for c in rows["grasp_class"]],
+                             np.uint8).reshape(-1, 3)
+        log.log_points("samples/camera/ground_truth", at(rows["uv"]), gt_colors)
+        best = (f"G_opt = ({cands[0].u:.0f}, {cands[0].v:.0f}) {cands[0].grasp_class.name} "
+                f"J = {cands[0].score:.3f}") if cands else "no candidate"
+        log.log_text("log", f"test image {k}: {len(cands)} candidates; {best}")
+
+
+def train(cfg: DictConfig) -> Path:
+    """Train the DCNN on a label artifact; returns the training artifact folder."""
+    label_dir = resolve_artifact(data_root(cfg), "label", cfg.train.label_version)
+    gen_version = load_manifest(label_dir)["upstream"]["generate"]
+    gen_dir = resolve_artifact(data_root(cfg), "generate", gen_version)
+    if cfg.train.augment_flip not in FLIPS:
+        raise ValueError(f"train.augment_flip={cfg.train.augment_flip!r}; choose one of {FLIPS}")
+    device = pick_device(cfg.train.device)
+    config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
+    config["train"]["device_type"] = device.type
+    upstream = {"label": label_dir.name, "generate": gen_dir.name}
+    version = compute_version(STAGE, config, upstream)
+    resume_config = copy.deepcopy(config)
+    resume_config["train"].pop("epochs")
+    resume_dir = Path(cfg.paths.models) / STAGE / (RESUME_PREFIX + compute_version(
+        STAGE + "-resume", resume_config, upstream))
+    seed, tc = int(cfg.seed), cfg.train
+    progress = bool(cfg.logging.progress)
+
+    def body(run: StageRun) -> None:
+        if device.type == "cuda":
+            os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
+        torch.use_deterministic_algorithms(True, warn_only=device.type == "cuda")
+        torch.set_num_threads(int(tc.num_threads))
+        torch.manual_seed(seed)
+        net_cfg = network_config(cfg)
+        norm = normalisation(cfg)
+        t0 = time.perf_counter()
+        sets = {split: GraspDataset(gen_dir, LabelSet(label_dir, split), split, norm,
+                                    net_cfg.grid, cfg.hand,
+                                    int(tc.max_train_images) if split == "train" else 0)
+                for split in ("train", "val", "test")}
+        run.timings["load_s"] = round(time.perf_counter() - t0, 3)
+        train_set = sets["train"]
+        if len(train_set) == 0:
+            raise ValueError("the label artifact has no training images")
+        net = GraspNet(net_cfg).to(device)
+        opt = torch.optim.Adam(net.parameters(), lr=float(tc.lr),
+                               betas=tuple(float(b) for b in tc.betas))
+        loss_cfg = LossConfig(alpha=float(tc.alpha), gamma=float(tc.gamma),
+                              lambda_coord=float(tc.lambda_coord),
+                              lambda_class=float(tc.lambda_class))
+        history = {k: [] for k in ("train_loss", "val_loss", "step_total", "step_coord",
+                                   "step_class")}
+        start_epoch = 0
+        ckpt_path = resume_dir / CHECKPOINT
+        if ckpt_path.is_file():
+            ckpt = torch.load(ckpt_path, map_location="cpu", weights_only=True)
+            if ckpt["epoch"] <= int(tc.epochs):
+                net.load_state_dict(ckpt["model"])
+                opt.load_state_dict(ckpt["optimizer"])
+                history, start_epoch = ckpt["history"], int(ckpt["epoch"])
+                print(f"train: resuming from {ckpt_path} at epoch {start_epoch}")
+        batch = int(tc.batch_size)
+        steps_per_epoch = math.ceil(len(train_set) / batch)
+        images_done, train_s = 0, 0.0
+        for epoch in range(start_epoch, int(tc.epochs)):
+            order, flips = epoch_order(len(train_set), seed, epoch, tc.augment_flip)
+            net.train()
+            t_epoch = time.perf_counter()
+            running = 0.0
+            bar = tqdm(range(steps_per_epoch), desc=f"train epoch {epoch + 1}/{tc.epochs}",
+                       unit="batch", disable=not progress)
+            for s in bar:
+                idx = order[s * batch:(s + 1) * batch]
+                x, targets = train_set.batch(idx, [flips[i] for i in range(s * batch, s * batch + len(idx))])
+                loss = grasp_loss(net(x.to(device)), targets, loss_cfg)
+                if not torch.isfinite(loss["total"]):
+                    raise FloatingPointError(f"loss is {float(loss['total'])} at epoch {epoch + 1}"
+                                             f" step {s}; lower train.lr or check the labels")
+                opt.zero_grad(set_to_none=True)
+                loss["total"].backward()
+                opt.step()
+                values = [float(loss[k].detach()) for k in ("total", "coord", "class")]
+                for key, v in zip(("step_total", "step_coord", "step_class"), values):
+                    history[key].append(v)
+                running += values[0] * len(idx)
+                bar.set_postfix(loss=f"{values[0]:.4f}")
+            bar.close()
+            train_s += time.perf_counter() - t_epoch
+            images_done += len(train_set)
+            history["train_loss"].append(running / len(train_set))
+            history["val_loss"].append(evaluate_loss(net, sets["val"], loss_cfg, device))
+            _save_atomic({"model": _cpu_state(net), "optimizer": _cpu_state(opt),
+                          "config": OmegaConf.to_container(cfg, resolve=True),
+                          "epoch": epoch + 1, "history": history,
+                          "metrics": {"train_loss": history["train_loss"][-1],
+                                      "val_loss": history["val_loss"][-1]}}, ckpt_path)
+            print(f"train: epoch {epoch + 1}/{tc.epochs} train loss "
+                  f"{history['train_loss'][-1]:.4f} val loss {history['val_loss'][-1]:.4f}")
+
+        ranking = ranking_config(cfg)
+        model_blob = {"state_dict": _cpu_state(net), "network": dataclasses.asdict(net_cfg),
+                      "normalisation": norm.as_dict(), "ranking": dataclasses.asdict(ranking),
+                      "classes": [c.name for c in GraspClass]}
+        torch.save(model_blob, run.work_dir / MODEL_FILE)
+        if ckpt_path.is_file():
+            (run.work_dir / CHECKPOINT).write_bytes(ckpt_path.read_bytes())
+        planner = Planner(net, norm, ranking, device)
+
+        t1 = time.perf_counter()
+        result = table1(planner, sets["test"], float(tc.match_radius_px))
+        run.timings["test_eval_s"] = round(time.perf_counter() - t1, 3)
+        curve = result.pop("pr_curve")
+        with open(run.work_dir / "pr_curve.csv", "w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(["rank", "score", "precision", "recall"])
+            for r, (sc, p, rc) in enumerate(zip(curve["score"], curve["precision"],
+                                                curve["recall"]), 1):
+                w.writerow([r, f"{sc:.6f}", f"{p:.6f}", f"{rc:.6f}"])
+
+        lost, total = sum(d.lost_points for d in sets.values()), sum(d.total_points for d in sets.values())
+        run.metrics.update({
+            "network": {"width": net_cfg.width, "parameters": count_parameters(net),
+                        "macs_per_image": count_flops(net),
+                        "gmacs_per_image": round(count_flops(net) / 1e9, 4)},
+            "images": {s: len(d) for s, d in sets.items()},
+            "one_point_per_cell": {
+                "lost_points": int(lost), "total_points": int(total),
+                "lost_fraction": round(lost / max(total, 1), 6),
+                "per_split": {s: {"lost": d.lost_points, "total": d.total_points}
+                              for s, d in sets.items()}},
+            "epochs": int(tc.epochs),
+            "train_loss_per_epoch": [round(v, 6) for v in history["train_loss"]],
+            "val_loss_per_epoch": [round(v, 6) if math.isfinite(v) else None
+                                   for v in history["val_loss"]],
+            "table1": result,
+            "table1_definition": "see pipeline/planner/evaluate.py (module docstring)",
+            "pr_curve": downsample_curve(curve),
+            "device": device.type,
+        })
+        run.timings.update({
+            "train_s": round(train_s, 3), "epochs_run_here": int(tc.epochs) - start_epoch,
+            "train_images_per_s": round(images_done / train_s, 3) if train_s else None})
+
+        with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version) as log:
+            _log_history(log, history, steps_per_epoch)
+            end_ns = (len(history["step_total"]) + 1) * 1_000_000
+            log.set_time(sequences={"epoch": int(tc.epochs)}, clock_ns=end_ns)
+            for key in ("top1", "top1pct", "top5pct", "top10pct"):
+                if result[key] is not None:
+                    log.log_scalar(f"test/table1/{key}", result[key])
+            _log_samples(log, planner, sets["test"], int(tc.log_samples), end_ns + 1_000_000_000)
+
+    return run_stage(Path(cfg.paths.models), STAGE, version, config, upstream, body,
+                     seed=seed, force=bool(tc.force))
+
+
+@hydra.main(config_path=CONF_DIR, config_name="train", version_base="1.3")
+def main(cfg: DictConfig) -> None:
+    stage_main(train)(cfg)
+
+
+if __name__ == "__main__":
+    main()
