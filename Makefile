@@ -8,7 +8,7 @@ ARGS ?=
 STAGE ?= generate
 RUN := $(PY) -m
 
-.PHONY: help setup test test-slow reproduce generate label report verify view bench repro-check lock clean
+.PHONY: help setup test test-slow reproduce generate label train report verify view bench repro-check lock clean
 
 help: ## List the targets
 	@grep -hE '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  make %-12s %s\n", $$1, $$2}'
@@ -26,6 +26,7 @@ test-slow: setup ## Run the slow tests too
 reproduce: setup ## Run every stage with EXPERIMENT (default: default), then the report
 	$(RUN) pipeline.generate experiment=$(EXPERIMENT) $(ARGS)
 	$(RUN) pipeline.label experiment=$(EXPERIMENT) $(ARGS)
+	$(RUN) pipeline.train experiment=$(EXPERIMENT) $(ARGS)
 	$(RUN) pipeline.report experiment=$(EXPERIMENT) $(ARGS)
 
 generate: setup ## Generation stage: depth images of box heaps (paper Sec. 4.3)
@@ -33,6 +34,9 @@ generate: setup ## Generation stage: depth images of box heaps (paper Sec. 4.3)
 
 label: setup ## Labelling stage: surfaces, hand- and robot-level grasp classes (Sec. 4.3)
 	$(RUN) pipeline.label experiment=$(EXPERIMENT) $(ARGS)
+
+train: setup ## Training stage: the DCNN grasp planner on the labels (Secs. 4.1, 4.2)
+	$(RUN) pipeline.train experiment=$(EXPERIMENT) $(ARGS)
 
 report: setup ## Report stage: tables and figures into reports/
 	$(RUN) pipeline.report experiment=$(EXPERIMENT) $(ARGS)

@@ -151,6 +151,57 @@ def stage_rates(num_scenes: int, root: str) -> dict[str, float]:
     return out
 
 
+def planning_times(cfg, num_images: int = 8, repeats: int = 3) -> dict[str, float]:
+    """Median planning time per image (network + decoding + ranking, CPU, 2 threads).
+
+    For the ``default`` network: the trained planner of ``models/train/latest`` when it exists
+    (so the number of ranked candidates is real), otherwise an untrained one of the same width.
+    For the ``paper`` network (width 1.0): network + decoding + ranking, untrained weights.
+    """
+    import torch
+
+    from pipeline.artifacts.fingerprint import REPO_ROOT
+    from pipeline.cli import compose
+    from pipeline.planner.data import Normalisation
+    from pipeline.planner.network import GraspNet, NetworkConfig
+    from pipeline.planner.planner import Planner, ranking_config
+    from pipeline.simulation.scene import connect, scene_rng, simulate_scene
+
+    torch.set_num_threads(2)
+    client = connect()
+    scenes = [simulate_scene(client, cfg, scene_rng(BENCH_SEED, 2, i)) for i in range(num_images)]
+    p.disconnect(client)
+    intr = intrinsics_of(cfg)
+    out: dict[str, float] = {}
+    trained = REPO_ROOT / "models" / "train" / "latest" / "model.pt"
+    for name in ("default", "paper"):
+        full = compose("train", [f"experiment={name}"])
+        if name == "default" and trained.is_file():
+            planner, label = Planner.load(trained.parent), "trained"
+        else:
+            net = GraspNet(NetworkConfig(width=full.model.width))
+            rk = ranking_config(full)
+            planner = Planner(net, Normalisation(rk.d_ground, 0.1, 0.5), rk)
+            label = "untrained"
+        planner.plan(scenes[0].depth_m, intr)  # warm-up
+        times, counts = [], []
+        for _ in range(1 if name == "paper" else repeats):
+            for sc in scenes[: 3 if name == "paper" else num_images]:
+                t0 = time.perf_counter()
+                counts.append(len(planner.plan(sc.depth_m, intr)))
+                times.append(time.perf_counter() - t0)
+        out[f"plan_{name}_ms"] = 1000 * float(np.median(times))
+        out[f"plan_{name}_candidates"] = float(np.mean(counts))
+        print(f"planning, {name} network (width {full.model.width}, {label}): "
+              f"{out[f'plan_{name}_ms']:.1f} ms/image, {np.mean(counts):.1f} candidates ranked")
+    return out
+
+
+def intrinsics_of(cfg):
+    from pipeline.camera.geometry import Intrinsics
+    return Intrinsics.from_config(cfg.camera)
+
+
 def main(argv: list[str] | None = None) -> int:
     from omegaconf import OmegaConf
 
@@ -185,6 +236,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"labelling per scene, 1 process:         "
           f"{results['label_surfaces_ms_per_scene']:.1f} ms surfaces + "
           f"{results['label_robot_ms_per_scene']:.1f} ms robot checks")
+    results.update(planning_times(cfg))
     results["label_vs_generate_1w"] = results["label_1w_scenes_per_s"] / one
     print(f"labelling / generation, per process:    {results['label_vs_generate_1w']:.2f} "
           "(target >= 1: labelling is not the bottleneck)")

@@ -1,8 +1,9 @@
 """The report stage: gather the latest artifacts into ``reports/`` (tables, figures, README).
 
 ``report(cfg)`` is a pure function of the config and its upstream artifacts. For now it reports
-the generated dataset and, when a label artifact exists, its grasp-point labels (the paper's
-Tables 1–3 follow once the training, baseline and evaluation stages exist). It writes the
+the generated dataset, when a label artifact exists its grasp-point labels, and when a train
+artifact exists the paper's Table 1 (Tables 2–3 follow once the baseline and evaluation stages
+exist). It writes the
 versioned artifact ``data/report/<version>/``::
 
     manifest.json                 what produced it (see pipeline.artifacts)
@@ -15,6 +16,8 @@ versioned artifact ``data/report/<version>/``::
     figures/sample_depth.png      ``report.num_sample_images`` test depth images + instance masks
     figures/boxes_per_scene.png   histogram of boxes per scene, all splits
     figures/labels_sample.png     test depth images with their grasp points coloured by class
+    tables/table1_precision.csv   Table 1: precision top 1 / top 1 % / 5 % / 10 %, paper and ours
+    figures/pr_curve.png          the DCNN's precision–recall curve on the test split
     log.rrd, log.mcap             Rerun and MCAP logs of the tables (one text entry each)
 
 The three ``label_*``/``surface_*`` tables and ``labels_sample.png`` exist only when there is a
@@ -22,6 +25,10 @@ label artifact (``report.label_version``, default the latest one); without one t
 that labelling has not run. A label artifact made from another generation artifact than
 ``report.generate_version`` is an error. The labelling throughput (scenes/s) is run-dependent,
 so it stays in the label manifest's ``timings`` and is not copied here.
+
+``table1_precision.csv`` and ``pr_curve.png`` exist only when there is a train artifact
+(``report.train_version``, default the latest one under ``paths.models``); it must have been
+trained on the label artifact the report reads. Training timings are not copied either.
 
 and then publishes README.md, figures/ and tables/ into ``paths.reports`` (``<root>/reports/``),
 replacing those files one by one and leaving other files there alone.
@@ -74,14 +81,17 @@ from pipeline.report_figures import (  # noqa: F401 (FIG_DPI, PNG_METADATA, _out
     _outline,
     figure_boxes_per_scene,
     figure_labels_sample,
+    figure_pr_curve,
     figure_sample_depth,
 )
+from pipeline.planner.evaluate import PAPER_TABLE1
 from pipeline.tracking import StageLog
 
 STAGE = "report"
 SECTIONS = ("report",)
 # The upstream versions cover which artifacts are read.
-NOT_AFFECTING_RESULT = ("report.force", "report.generate_version", "report.label_version")
+NOT_AFFECTING_RESULT = ("report.force", "report.generate_version", "report.label_version",
+                        "report.train_version")
 
 PUBLISHED = ("README.md", "figures", "tables")
 NONE = "—"  # shown in Markdown where a value does not exist (e.g. an empty split)
@@ -472,6 +482,122 @@ def render_labels(labels: LabelInfo | None, tables: dict[str, Table],
     return out
 
 
+# ---------------------------------------------------------------------- training (Table 1)
+TABLE1_SECTION = "Table 1 — precision of the DCNN's predictions (paper Sec. 7)"
+TRAIN_NOT_RUN = "Training: not run yet (`make train`)."
+# (manifest key, column header) of Table 1; the paper's values are pipeline.planner.evaluate's.
+TABLE1_COLUMNS = (("top1", "Top 1"), ("top1pct", "Top 1 %"), ("top5pct", "Top 5 %"),
+                  ("top10pct", "Top 10 %"))
+
+
+@dataclass
+class TrainInfo:
+    """The training artifact the report reads: its folder and manifest."""
+
+    folder: Path
+    manifest: dict
+
+    @property
+    def version(self) -> str:
+        return self.folder.name
+
+    @property
+    def metrics(self) -> dict:
+        return self.manifest["metrics"]
+
+
+def resolve_train(models: Path, version: str, label_version: str | None) -> TrainInfo | None:
+    """The training artifact to report, or None when ``version`` is "latest" and none exists.
+
+    Raises ``ArtifactError`` when a named version does not exist, when the artifact was trained
+    on another label artifact than ``label_version``, or when its manifest lacks Table 1.
+    """
+    try:
+        folder = resolve_artifact(models, "train", version)
+    except ArtifactError:
+        if version == "latest" and not available_versions(models, "train"):
+            return None
+        raise
+    manifest = load_manifest(folder)
+    train_label = (manifest.get("upstream") or {}).get("label")
+    if train_label != label_version:
+        used = label_version if label_version is not None else "none (no label artifact)"
+        raise ArtifactError(
+            f"train artifact {folder.name} was trained on label artifact {train_label}, but the "
+            f"report reads label artifact {used}: pass matching versions "
+            f"(report.label_version={train_label} report.train_version={folder.name}), or rerun "
+            f"`make train` (train.label_version={label_version}) and then the report.")
+    try:
+        metrics = manifest["metrics"]
+        complete = (all(key in metrics["table1"] for key, _ in TABLE1_COLUMNS)
+                    and {"precision", "recall"} <= set(metrics["pr_curve"])
+                    and {"width", "parameters", "macs_per_image"} <= set(metrics["network"]))
+    except (KeyError, TypeError):
+        complete = False
+    if not complete:
+        raise ArtifactError(
+            f"{folder.name}/manifest.json (train) lacks metrics.table1 / pr_curve / network: the "
+            "train artifact predates the report's Table 1; recompute it with `make train` "
+            "(train.force=true).")
+    return TrainInfo(folder, manifest)
+
+
+def table1_table(trained: TrainInfo) -> Table:
+    """Table 1: the paper's precision and ours (percent; CSV with 4 decimals)."""
+    ours = trained.metrics["table1"]
+    headers = ["", *(h for _, h in TABLE1_COLUMNS)]
+    rows = [["paper", *(100.0 * PAPER_TABLE1[k] for k, _ in TABLE1_COLUMNS)],
+            ["this reproduction", *(None if ours[k] is None else 100.0 * float(ours[k])
+                                    for k, _ in TABLE1_COLUMNS)]]
+    n = len(TABLE1_COLUMNS)
+    return Table("table1_precision", headers, rows, [""] + ["{:.2f} %"] * n,
+                 csv_formats=[""] + ["{:.4f}"] * n)
+
+
+def render_train(trained: TrainInfo | None, tables: dict[str, Table],
+                 figure: str | None) -> list[str]:
+    """README lines of the Table 1 section (``figure``: the PR-curve figure, if drawn)."""
+    out = [f"## {TABLE1_SECTION}", ""]
+    if trained is None:
+        return out + [TRAIN_NOT_RUN, ""]
+    m = trained.metrics
+    t1 = m["table1"]
+    net = m["network"]
+    cfg = trained.manifest.get("config", {})
+    radius = t1.get("radius_px", (cfg.get("train") or {}).get("match_radius_px"))
+    images = m.get("images") or {}
+    epochs = m.get("epochs", (cfg.get("train") or {}).get("epochs"))
+    out += [
+        f"Precision (%) of the DCNN of train artifact `{trained.version}` on the test split "
+        f"({t1.get('num_images', images.get('test'))} images, "
+        f"{t1.get('num_predictions')} ranked predictions, "
+        f"{t1.get('num_ground_truth')} ground-truth grasp points), from its manifest's metrics; "
+        "the paper's row is copied from its Table 1 for comparison.",
+        "",
+        tables["table1_precision"].markdown(),
+        "*Precision* (the paper gives no definition; this is ours, "
+        "`pipeline/planner/evaluate.py`): every cell of every test image gives one prediction "
+        "(its grasp point, its class argmax p(c) and its confidence S = max p(c)); cells whose "
+        "class is NG are not predictions, and ground-truth points of class NG are ignored. "
+        "Within an image, predictions are matched in descending S: one is correct when a "
+        f"not yet matched ground-truth grasp point of the *same class* (R, L or B) lies within "
+        f"{float(radius):g} pixels. *Top 1*: the fraction of test images whose highest-S "
+        "prediction is correct. *Top k %*: all predictions of all test images pooled and sorted "
+        "by S; the precision of the first ceil(k/100 · M) of the M predictions.",
+        "",
+        f"Network: width multiplier {float(net['width']):g}, {int(net['parameters']):,} "
+        f"parameters, {int(net['macs_per_image']):,} multiply-accumulates per image "
+        f"({2 * int(net['macs_per_image']) / 1e9:.3f} GFLOPs, convolutions only). Trained on "
+        f"{images.get('train')} training images for {epochs} epoch"
+        f"{'' if epochs == 1 else 's'}.",
+        "",
+        "CSV version: [tables/table1_precision.csv](tables/table1_precision.csv)."
+        + (f" Precision–recall curve: [{figure}]({figure})." if figure else ""),
+        "",
+    ]
+    return out
+
+
 # ---------------------------------------------------------------------- README
 def _commit(manifest: dict) -> str:
     code = manifest.get("code", {})
@@ -483,7 +609,7 @@ def _commit(manifest: dict) -> str:
 
 def render_readme(version: str, upstream: dict[str, tuple[str, dict]], tables: dict[str, Table],
                   figures: dict[str, str], gen_cfg: dict, stats: DatasetStats,
-                  labels: LabelInfo | None = None) -> str:
+                  labels: LabelInfo | None = None, trained: TrainInfo | None = None) -> str:
     phys = gen_cfg.get("physics", {})
     dt = float(phys.get("time_step", 1 / 240))
     cap = phys.get("max_settle_steps")
@@ -504,6 +630,8 @@ def render_readme(version: str, upstream: dict[str, tuple[str, dict]], tables: d
         out.append(f"| {stage} | `{ver}` | {_commit(manifest)} |")
     if labels is None:
         out.append(f"| label | not run yet (`make label`) | {NONE} |")
+    if trained is None:
+        out.append(f"| train | not run yet (`make train`) | {NONE} |")
     out += [
         "",
         "Each artifact lives in `data/<stage>/<version>/`; its `manifest.json` holds the full "
@@ -533,16 +661,21 @@ def render_readme(version: str, upstream: dict[str, tuple[str, dict]], tables: d
     ]
     label_figure = "figures/labels_sample.png"
     out += render_labels(labels, tables, label_figure if label_figure in figures else None)
+    pr_figure = "figures/pr_curve.png"
+    out += render_train(trained, tables, pr_figure if pr_figure in figures else None)
     out += ["## Figures", ""]
     for rel, caption in figures.items():
         out += [f"![{caption}]({rel})", "", f"*{caption}*", ""]
     out += [
         "## Paper tables",
         "",
-        "Tables 1–3 of the paper (1: precision of the DCNN model's predictions; 2: percentage of "
-        "grasp points within 30 pixels of a surface centre, ours vs. Dex-Net; 3: bin-picking "
-        "success rate and speed) will appear here when the training, baseline and evaluation "
-        "stages exist. No numbers are reported for them yet.",
+        ("Table 1 of the paper (precision of the DCNN model's predictions) is reported above, "
+         f"in \"{TABLE1_SECTION}\". " if trained is not None else
+         "Table 1 of the paper (precision of the DCNN model's predictions) will appear above "
+         "once the training stage has run (`make train`). ")
+        + "Tables 2–3 (2: percentage of grasp points within 30 pixels of a surface centre, ours "
+        "vs. Dex-Net; 3: bin-picking success rate and speed) will appear here when the baseline "
+        "and evaluation stages exist. No numbers are reported for them yet.",
         "",
     ]
     return "\n".join(out)
@@ -597,10 +730,14 @@ def report(cfg: DictConfig) -> Path:
     if num_samples < 0:
         raise ValueError(f"report.num_sample_images must be >= 0, got {num_samples}")
     labels = resolve_labels(root, str(cfg.report.label_version), gen_version)
+    trained = resolve_train(Path(cfg.paths.models), str(cfg.report.train_version),
+                            labels.version if labels is not None else None)
     config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
     upstream = {"generate": gen_version}
     if labels is not None:
         upstream["label"] = labels.version
+    if trained is not None:
+        upstream["train"] = trained.version
     version = compute_version(STAGE, config, upstream)
     gen_cfg = gen_manifest.get("config", {})
 
@@ -616,6 +753,9 @@ def report(cfg: DictConfig) -> Path:
             for t in (label_classes_table(labels), label_ng_reasons_table(labels),
                       surface_accuracy_table(labels)):
                 tables[t.name] = t
+        if trained is not None:
+            t = table1_table(trained)
+            tables[t.name] = t
         for t in tables.values():
             path = run.work_dir / "tables" / f"{t.name}.csv"
             path.parent.mkdir(parents=True, exist_ok=True)
@@ -639,11 +779,19 @@ def report(cfg: DictConfig) -> Path:
                 f"Grasp points of {drawn} depth images of the {split} split, coloured by their "
                 "class after the robot-level check (R red, L green, B blue, NG grey; paper "
                 "Fig. 4f)." if drawn else "No labelled scenes to draw.")
+        if trained is not None:
+            figure_pr_curve(trained.metrics["pr_curve"], run.work_dir / "figures" / "pr_curve.png")
+            figures["figures/pr_curve.png"] = (
+                "Precision–recall curve of the DCNN on the test split: all predictions pooled "
+                "and ranked by confidence (from the train manifest; Table 1's definition).")
 
         used = {"generate": (gen_version, gen_manifest)}
         if labels is not None:
             used["label"] = (labels.version, labels.manifest)
-        readme = render_readme(run.version, used, tables, figures, gen_cfg, stats, labels)
+        if trained is not None:
+            used["train"] = (trained.version, trained.manifest)
+        readme = render_readme(run.version, used, tables, figures, gen_cfg, stats, labels,
+                               trained)
         (run.work_dir / "README.md").write_text(readme)
 
         with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version) as log:
@@ -661,6 +809,7 @@ def report(cfg: DictConfig) -> Path:
         run.metrics.update({
             "generate_version": gen_version,
             "label_version": labels.version if labels is not None else None,
+            "train_version": trained.version if trained is not None else None,
             "scenes": dict(stats.scenes),
             "boxes": dict(stats.boxes),
             "grasp_points": ({s: int(labels.splits[s]["grasp_points"]) for s in SPLITS}

@@ -194,3 +194,25 @@ def figure_labels_sample(gen_dir: Path, label_dir: Path, num: int, path: Path
                  "(light = near, dark = far, brown = no data)", fontsize=9)
     _save(fig, path)
     return split, n
+
+
+def figure_pr_curve(curve: dict, path: Path, paper: dict | None = None) -> None:
+    """Precision–recall curve of the DCNN on the test split (the train manifest's
+    ``metrics.pr_curve``: precision and recall along the pooled ranking by confidence)."""
+    fig = Figure(figsize=(5.2, 4.0), dpi=FIG_DPI, layout="constrained")
+    ax = fig.subplots()
+    precision = np.asarray(curve.get("precision") or [], np.float64)
+    recall = np.asarray(curve.get("recall") or [], np.float64)
+    if len(precision):
+        ax.plot(recall, precision, color="tab:blue", lw=1.5, label="this reproduction")
+    else:
+        ax.text(0.5, 0.5, "no predictions", transform=ax.transAxes, ha="center")
+    ax.set_xlim(0.0, 1.0)
+    ax.set_ylim(0.0, 1.02)
+    ax.set_xlabel("recall")
+    ax.set_ylabel("precision")
+    ax.grid(True, alpha=0.3)
+    if len(precision):
+        ax.legend(fontsize=8, loc="upper right")
+    ax.set_title("Precision–recall of the DCNN (test split)", fontsize=10)
+    _save(fig, path)

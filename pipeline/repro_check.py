@@ -20,9 +20,11 @@ from pathlib import Path
 
 from pipeline.artifacts.store import load_manifest, resolve_artifact
 from pipeline.tracking import rrd_equal
+from pipeline.view import MODEL_STAGES
 
 # The smoke pipeline, in order; later issues append their stages here.
-STAGES = ("generate", "label", "report")
+STAGES = ("generate", "label", "train", "report")
+
 
 
 def run_pipeline(root: Path, extra: list[str]) -> None:
@@ -37,8 +39,9 @@ def compare(root_a: Path, root_b: Path) -> list[str]:
     """Differences between the two runs' artifacts (empty when identical)."""
     diffs = []
     for stage in STAGES:
-        a = resolve_artifact(root_a / "data", stage)
-        b = resolve_artifact(root_b / "data", stage)
+        top = "models" if stage in MODEL_STAGES else "data"
+        a = resolve_artifact(root_a / top, stage)
+        b = resolve_artifact(root_b / top, stage)
         if a.name != b.name:
             diffs.append(f"{stage}: versions differ ({a.name} vs {b.name})")
             continue

@@ -16,6 +16,8 @@ from pathlib import Path
 from pipeline.artifacts.fingerprint import REPO_ROOT
 from pipeline.artifacts.store import ArtifactError, resolve_artifact
 
+MODEL_STAGES = ("train",)  # artifacts under paths.models
+
 
 def rerun_executable() -> str:
     local = Path(sys.executable).with_name("rerun")
@@ -29,8 +31,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--root", type=Path,
                         default=Path(os.environ.get("BINPICK_ROOT", REPO_ROOT)))
     args = parser.parse_args(argv)
+    top = args.root / ("models" if args.stage in MODEL_STAGES else "data")
     try:
-        folder = resolve_artifact(args.root / "data", args.stage, args.version)
+        folder = resolve_artifact(top, args.stage, args.version)
     except ArtifactError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

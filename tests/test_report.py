@@ -18,9 +18,12 @@ from pipeline.dataset.scenes import SPLITS, SceneDataset
 from pipeline.generate import generate
 from pipeline.label import LabelSet, label
 from pipeline.labelling.types import GraspClass
+from pipeline.planner.evaluate import PAPER_TABLE1
 from pipeline.report import (
-    LABEL_NOT_RUN, LabelInfo, _outline, check_labels, dataset_stats, publish, report,
+    LABEL_NOT_RUN, TABLE1_SECTION, TRAIN_NOT_RUN, LabelInfo, _outline, check_labels,
+    dataset_stats, publish, report,
 )
+from pipeline.train import train
 
 TINY = ("generate.num_scenes=4", "generate.num_val_scenes=1", "generate.num_test_scenes=2",
         "generate.workers=1")
@@ -37,6 +40,8 @@ def _cfg(root: Path, name: str, *overrides: str):
 def _generate_and_label(root: Path) -> None:
     generate(_cfg(root, "generate", *TINY))
     label(_cfg(root, "label", *TINY, "label.workers=1"))
+    # A smoke training (1 epoch, width 0.0625) on CPU, where it is deterministic.
+    train(_cfg(root, "train", *TINY, "train.device=cpu"))
 
 
 @pytest.fixture(scope="module")
@@ -95,8 +100,10 @@ def test_readme_names_versions_and_split_counts(root_a: Path, report_a: Path) ->
     assert report_a.name in readme
     label_dir = (root_a / "data" / "label" / "latest").resolve()
     assert label_dir.name in readme
+    train_dir = (root_a / "models" / "train" / "latest").resolve()
     assert load_manifest(report_a)["upstream"] == {"generate": gen_dir.name,
-                                                   "label": label_dir.name}
+                                                   "label": label_dir.name,
+                                                   "train": train_dir.name}
     dataset = _section(readme, "## Dataset")
     rows = {line.split("|")[1].strip(): [c.strip() for c in line.strip("|\n ").split("|")]
             for line in dataset.splitlines()
@@ -273,7 +280,7 @@ def test_csv_tables_agree_with_dataset(root_a: Path, report_a: Path) -> None:
 
 
 def test_figures_are_png(root_a: Path, report_a: Path) -> None:
-    for name in ("sample_depth.png", "boxes_per_scene.png", "labels_sample.png"):
+    for name in ("sample_depth.png", "boxes_per_scene.png", "labels_sample.png", "pr_curve.png"):
         path = root_a / "reports" / "figures" / name
         data = path.read_bytes()
         assert data[:8] == PNG_SIGNATURE
@@ -310,6 +317,7 @@ def test_report_is_reproducible_across_roots(root_a: Path, report_a: Path, tmp_p
     files_a.pop("log.rrd")
     files_b.pop("log.rrd")
     assert "log.mcap" in files_a and "figures/labels_sample.png" in files_a
+    assert {"tables/table1_precision.csv", "figures/pr_curve.png"} <= set(files_a)
     assert files_a == files_b
     for rel in files_a:  # byte-identical, not just equal hashes in the manifests
         assert (report_a / rel).read_bytes() == (report_b / rel).read_bytes(), rel
@@ -323,10 +331,12 @@ def test_report_without_label_artifact(root_gen_only: Path, report_a: Path) -> N
     readme = (out / "README.md").read_text()
     assert LABEL_NOT_RUN in readme
     assert "Labelling: not run yet (`make label`)" in readme
+    assert "Training: not run yet (`make train`)" in readme and TRAIN_NOT_RUN in readme
     assert "### Grasp points per class" not in readme
     files = load_manifest(out)["files"]
     assert "tables/dataset_splits.csv" in files and "figures/sample_depth.png" in files
-    assert not any(name in rel for rel in files for name in (*LABEL_TABLES, "labels_sample"))
+    assert not any(name in rel for rel in files
+                   for name in (*LABEL_TABLES, "labels_sample", "table1_precision", "pr_curve"))
     # the dataset part is the same as with labels
     for rel in ("tables/dataset_splits.csv", "tables/box_types.csv", "figures/sample_depth.png"):
         assert (out / rel).read_bytes() == (report_a / rel).read_bytes()
@@ -358,10 +368,10 @@ def test_rerun_reuses_artifact(root_a: Path, report_a: Path) -> None:
 def test_publish_keeps_other_files(report_a: Path, tmp_path: Path) -> None:
     reports = tmp_path / "reports"
     (reports / "tables").mkdir(parents=True)
-    (reports / "tables" / "table1_precision.csv").write_text("from another stage\n")
+    (reports / "tables" / "table2_dexnet.csv").write_text("from another stage\n")
     (reports / "README.md").write_text("old\n")
     publish(report_a, reports)
-    assert (reports / "tables" / "table1_precision.csv").read_text() == "from another stage\n"
+    assert (reports / "tables" / "table2_dexnet.csv").read_text() == "from another stage\n"
     assert (reports / "README.md").read_bytes() == (report_a / "README.md").read_bytes()
     assert (reports / "figures" / "sample_depth.png").is_file()
     assert [p.name for p in tmp_path.iterdir()] == ["reports"]  # no temporary folder left
@@ -389,3 +399,52 @@ def test_sample_count_is_validated(root_a: Path) -> None:
     with pytest.raises(ValueError, match="num_sample_images"):
         report(_cfg(root_a, "report", "report.num_sample_images=-1"))
 
+
+
+COLUMNS = {"Top 1": "top1", "Top 1 %": "top1pct", "Top 5 %": "top5pct", "Top 10 %": "top10pct"}
+
+
+def test_table1_matches_train_manifest(root_a: Path, report_a: Path) -> None:
+    train_dir = (root_a / "models" / "train" / "latest").resolve()
+    manifest = load_manifest(train_dir)
+    ours = manifest["metrics"]["table1"]
+    readme = (root_a / "reports" / "README.md").read_text()
+    assert train_dir.name in readme and TRAIN_NOT_RUN not in readme
+    section = _section(readme, f"## {TABLE1_SECTION}")
+    rows = {r[""]: r for r in _md_table(section)}
+    assert list(rows) == ["paper", "this reproduction"]
+    assert [rows["paper"][h] for h in COLUMNS] == ["83.10 %", "80.25 %", "67.22 %", "55.64 %"]
+    for header, key in COLUMNS.items():
+        expected = "—" if ours[key] is None else f"{100 * ours[key]:.2f} %"
+        assert rows["this reproduction"][header] == expected, header
+    # the definition and the network are described right there, without timings
+    assert "same class" in section and "NG" in section and "ceil(k/100" in section
+    assert f"{ours['radius_px']:g} pixels" in section
+    net = manifest["metrics"]["network"]
+    assert f"{net['parameters']:,} parameters" in section
+    assert f"{net['macs_per_image']:,} multiply-accumulates" in section
+    assert f"{manifest['metrics']['images']['train']} training images for 1 epoch" in section
+    assert "images_per_s" not in section and "train_s" not in section
+    paper_tables = _section(readme, "## Paper tables")
+    assert "Table 1" in paper_tables and "reported above" in paper_tables
+
+    table = {r[""]: r for r in _read_csv(root_a / "reports" / "tables" / "table1_precision.csv")}
+    for header, key in COLUMNS.items():
+        assert float(table["paper"][header]) == pytest.approx(100 * PAPER_TABLE1[key], abs=1e-4)
+        if ours[key] is None:
+            assert table["this reproduction"][header] == ""
+        else:
+            assert float(table["this reproduction"][header]) == pytest.approx(
+                100 * ours[key], abs=1e-4)
+    assert (report_a / "figures" / "pr_curve.png").read_bytes()[:8] == PNG_SIGNATURE
+    assert "train_version" not in load_manifest(report_a)["config"]["report"]
+
+
+def test_train_artifact_of_another_label_is_an_error(root_a: Path, tmp_path: Path) -> None:
+    # root_a's train artifact with only its generation artifact: no label artifact to match.
+    root = tmp_path / "train_mismatch"
+    shutil.copytree(root_a / "data" / "generate", root / "data" / "generate", symlinks=True)
+    shutil.copytree(root_a / "models" / "train", root / "models" / "train", symlinks=True)
+    with pytest.raises(ArtifactError, match="make train") as info:
+        report(_cfg(root, "report"))
+    assert "report.train_version" in str(info.value)

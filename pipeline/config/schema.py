@@ -233,6 +233,7 @@ class ReportConfig:
 
     generate_version: str = "latest"
     label_version: str = "latest"  # no label artifact at all: the report leaves labels out
+    train_version: str = "latest"  # no train artifact at all: the report leaves Table 1 out
     num_sample_images: int = 6
     force: bool = False
 
