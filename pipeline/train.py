@@ -273,7 +273,10 @@ def train(cfg: DictConfig) -> Path:
             history["train_loss"].append(running / len(train_set))
             history["val_loss"].append(evaluate_loss(net, sets["val"], loss_cfg, device))
             _save_atomic({"model": _cpu_state(net), "optimizer": _cpu_state(opt),
-                          "config": OmegaConf.to_container(cfg, resolve=True),
+                          # Without paths and logging: where a run writes and how it logs do
+                          # not change the model, and the file must not depend on them.
+                          "config": {k: v for k, v in OmegaConf.to_container(cfg, resolve=True)
+                                     .items() if k not in ("paths", "logging")},
                           "epoch": epoch + 1, "history": history,
                           "metrics": {"train_loss": history["train_loss"][-1],
                                       "val_loss": history["val_loss"][-1]}}, ckpt_path)
