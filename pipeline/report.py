@@ -296,18 +296,26 @@ class LabelInfo:
         return self.folder.name
 
 
+def _optional_artifact(root: Path, stage: str, version: str) -> Path | None:
+    """An upstream the report can do without: None when ``version`` is "latest" and no
+    ``stage`` artifact exists yet; a named version that does not exist is an error."""
+    try:
+        return resolve_artifact(root, stage, version)
+    except ArtifactError:
+        if version == "latest" and not available_versions(root, stage):
+            return None
+        raise
+
+
 def resolve_labels(root: Path, version: str, gen_version: str) -> LabelInfo | None:
     """The label artifact to report, or None when ``version`` is "latest" and none exists.
 
     Raises ``ArtifactError`` when a named version does not exist, when the artifact was made from
     another generation artifact than ``gen_version``, or when its manifest lacks the metrics.
     """
-    try:
-        folder = resolve_artifact(root, "label", version)
-    except ArtifactError:
-        if version == "latest" and not available_versions(root, "label"):
-            return None
-        raise
+    folder = _optional_artifact(root, "label", version)
+    if folder is None:
+        return None
     manifest = load_manifest(folder)
     label_gen = (manifest.get("upstream") or {}).get("generate")
     if label_gen != gen_version:
@@ -512,12 +520,9 @@ def resolve_train(models: Path, version: str, label_version: str | None) -> Trai
     Raises ``ArtifactError`` when a named version does not exist, when the artifact was trained
     on another label artifact than ``label_version``, or when its manifest lacks Table 1.
     """
-    try:
-        folder = resolve_artifact(models, "train", version)
-    except ArtifactError:
-        if version == "latest" and not available_versions(models, "train"):
-            return None
-        raise
+    folder = _optional_artifact(models, "train", version)
+    if folder is None:
+        return None
     manifest = load_manifest(folder)
     train_label = (manifest.get("upstream") or {}).get("label")
     if train_label != label_version:

@@ -56,6 +56,13 @@ def _mask_rgb(mask: np.ndarray) -> np.ndarray:
     return lut[mask]
 
 
+def _depth_range(scenes) -> tuple[float, float]:
+    """(min, max) of the scenes' valid depths in metres, for one shared colour scale."""
+    valid = np.concatenate([s.depth_m[s.depth_m > 0] for s in scenes])
+    vmin, vmax = (float(valid.min()), float(valid.max())) if valid.size else (0.0, 1.0)
+    return vmin, (vmax if vmax > vmin else vmin + 1e-3)
+
+
 def sample_split(gen_dir: Path) -> str | None:
     """The split the sample figure draws from: test, else train, else val (None = no scenes)."""
     for split in ("test", "train", "val"):
@@ -75,10 +82,7 @@ def figure_sample_depth(gen_dir: Path, num: int, path: Path) -> tuple[str | None
         _save(fig, path)
         return split, 0
     scenes = [ds[i] for i in range(n)]
-    valid = np.concatenate([s.depth_m[s.depth_m > 0] for s in scenes])
-    vmin, vmax = (float(valid.min()), float(valid.max())) if valid.size else (0.0, 1.0)
-    if vmax <= vmin:
-        vmax = vmin + 1e-3
+    vmin, vmax = _depth_range(scenes)
     pairs_per_row = min(3, n)
     rows = math.ceil(n / pairs_per_row)
     fig = Figure(figsize=(4.4 * pairs_per_row + 1.2, 2.4 * rows + 0.5), dpi=FIG_DPI,
@@ -156,10 +160,7 @@ def figure_labels_sample(gen_dir: Path, label_dir: Path, num: int, path: Path
         return split, 0
     ds, ls = SceneDataset(gen_dir, split), LabelSet(label_dir, split)
     scenes = [ds[i] for i in range(n)]
-    valid = np.concatenate([s.depth_m[s.depth_m > 0] for s in scenes])
-    vmin, vmax = (float(valid.min()), float(valid.max())) if valid.size else (0.0, 1.0)
-    if vmax <= vmin:
-        vmax = vmin + 1e-3
+    vmin, vmax = _depth_range(scenes)
     per_row = min(3, n)
     rows = math.ceil(n / per_row)
     fig = Figure(figsize=(3.3 * per_row, 3.3 * rows + 0.9), dpi=FIG_DPI, layout="constrained")
