@@ -72,6 +72,7 @@ from pipeline.artifacts import (
 from pipeline.artifacts.store import StageRun
 from pipeline.cli import CONF_DIR, data_root, stage_main
 from pipeline.dataset.scenes import SPLITS, SceneDataset
+from pipeline.dataset.storage import read_npz
 from pipeline.label import NG_REASONS, LabelSet
 from pipeline.labelling.types import GraspClass
 from pipeline.report_figures import (  # noqa: F401 (FIG_DPI, PNG_METADATA, _outline: API)
@@ -81,7 +82,9 @@ from pipeline.report_figures import (  # noqa: F401 (FIG_DPI, PNG_METADATA, _out
     _outline,
     figure_boxes_per_scene,
     figure_labels_sample,
+    figure_planner_points,
     figure_pr_curve,
+    figure_table2_curve,
     figure_sample_depth,
 )
 from pipeline.planner.evaluate import PAPER_TABLE1
@@ -91,7 +94,10 @@ STAGE = "report"
 SECTIONS = ("report",)
 # The upstream versions cover which artifacts are read.
 NOT_AFFECTING_RESULT = ("report.force", "report.generate_version", "report.label_version",
-                        "report.train_version")
+                        "report.train_version", "report.baseline_version")
+# Files whose content is measured wall-clock time: the same artifacts give other numbers on
+# another run, so `make repro-check` skips them (they are listed in metrics.volatile_files).
+VOLATILE_FILES = ("tables/planning_time.csv",)
 
 PUBLISHED = ("README.md", "figures", "tables")
 NONE = "—"  # shown in Markdown where a value does not exist (e.g. an empty split)
@@ -603,6 +609,139 @@ def render_train(trained: TrainInfo | None, tables: dict[str, Table],
     return out
 
 
+# ---------------------------------------------------------------------- Table 2 (baseline)
+TABLE2_SECTION = "Table 2: grasp points near surface centres, ours vs. Dex-Net (Sec. 8.1.1)"
+BASELINE_NOT_RUN = "Dex-Net-style comparison: not run yet (`make baseline`)."
+
+
+@dataclass
+class BaselineInfo:
+    """The baseline artifact the report reads: its folder, manifest and per-image results."""
+
+    folder: Path
+    manifest: dict
+
+    @property
+    def version(self) -> str:
+        return self.folder.name
+
+    @property
+    def metrics(self) -> dict:
+        return self.manifest["metrics"]
+
+
+def resolve_baseline(root: Path, version: str, gen_version: str,
+                     train_version: str | None) -> BaselineInfo | None:
+    """The baseline artifact to report, or None when ``version`` is "latest" and none exists.
+
+    Raises ``ArtifactError`` when a named version does not exist, when it was made from another
+    generation artifact, when its DCNN row comes from another train artifact than the report's,
+    or when its manifest lacks Table 2.
+    """
+    folder = _optional_artifact(root, "baseline", version)
+    if folder is None:
+        return None
+    manifest = load_manifest(folder)
+    up = manifest.get("upstream") or {}
+    if up.get("generate") != gen_version:
+        raise ArtifactError(
+            f"baseline artifact {folder.name} was made from generation artifact "
+            f"{up.get('generate')}, but the report reads {gen_version}: pass matching versions "
+            f"(report.baseline_version=...), or rerun `make baseline` and then the report.")
+    if up.get("train") is not None and train_version is not None and up["train"] != train_version:
+        raise ArtifactError(
+            f"baseline artifact {folder.name} compared the DCNN of train artifact {up['train']}, "
+            f"but the report reads train artifact {train_version}: rerun `make baseline` "
+            f"(baseline.train_version={train_version}) and then the report.")
+    try:
+        complete = bool(manifest["metrics"]["table2"]["rows"]) and (folder / "chosen.npz").is_file()
+    except (KeyError, TypeError):
+        complete = False
+    if not complete:
+        raise ArtifactError(f"{folder.name}/manifest.json (baseline) lacks metrics.table2; "
+                            "recompute it with `make baseline` (baseline.force=true).")
+    return BaselineInfo(folder, manifest)
+
+
+def table2_table(info: BaselineInfo) -> Table:
+    """Table 2: the paper's rows and ours, share of images within the radius (percent)."""
+    t2 = info.metrics["table2"]
+    radius = float(t2["radius_px"])
+    key = f"within_{radius:g}px"
+    paper = t2["paper"]["within_30px"]
+    headers = ["", "planner", f"within {radius:g} px", "images", "no grasp",
+               "median distance (px)"]
+    rows = [["paper", "Dex-Net 4.0", 100.0 * paper["dexnet4"], None, None, None],
+            ["paper", "ours (DCNN)", 100.0 * paper["ours"], None, None, None]]
+    for r in t2["rows"]:
+        rows.append(["this reproduction", r["name"], 100.0 * float(r[key]), int(r["images"]),
+                     int(r["no_grasp"]), r["median_distance_px"]])
+    return Table("table2_centre_distance", headers, rows,
+                 ["", "", "{:.2f} %", "{}", "{}", "{:.1f}"],
+                 csv_formats=["", "", "{:.4f}", "{}", "{}", "{:.3f}"], text_columns=2)
+
+
+def planning_time_table(info: BaselineInfo) -> Table:
+    """Planning time per image of each planner, as measured in the baseline run (volatile)."""
+    times = info.manifest.get("timings", {}).get("planning_ms_per_image", {})
+    names = {r["planner"]: r["name"] for r in info.metrics["table2"]["rows"]}
+    rows = [[names.get(k, k), v.get("mean"), v.get("median"), v.get("p90")]
+            for k, v in times.items() if v]
+    return Table("planning_time", ["planner", "mean (ms)", "median (ms)", "90th pct. (ms)"],
+                 rows, ["", "{:.1f}", "{:.1f}", "{:.1f}"], csv_formats=["", "", "", ""])
+
+
+def render_baseline(info: BaselineInfo | None, tables: dict[str, Table],
+                    figures: dict[str, str]) -> list[str]:
+    out = [f"## {TABLE2_SECTION}", ""]
+    if info is None:
+        return out + [BASELINE_NOT_RUN, ""]
+    m = info.metrics
+    cfg = info.manifest.get("config", {})
+    g = m.get("gqcnn", {})
+    labels = m.get("candidate_labels", {}).get("train", {})
+    test = g.get("test", {})
+    radius = float(m["table2"]["radius_px"])
+    out += [
+        f"Share of test images whose *optimal* grasp point lies within {radius:g} pixels of the "
+        f"centre of a true visible box face (baseline artifact `{info.version}`). The truth is "
+        "the simulator's box geometry (`true_visible_faces`), not the labelling stage; an image "
+        "where a planner finds no grasp counts as a miss; every planner sees the same images. "
+        "The paper's rows are copied from its Table 2.",
+        "",
+        tables["table2_centre_distance"].markdown(),
+        "**What the baseline is.** Dex-Net's weights and data cannot be downloaded here, so the "
+        "comparison planner is rebuilt from Dex-Net's published method and trained on this "
+        "project's heaps (`pipeline/dexnet/`): suction candidates sampled on the depth image "
+        "(Sobel normals, 68-px border, 30° approach limit), the cross-entropy method with "
+        "Dex-Net 4.0's suction parameters (200 seeds, 50 samples × 3 iterations, elite fraction "
+        "0.25, Gaussian mixtures), and two quality functions: a GQ-CNN trained on candidates "
+        "labelled by a suction contact model on the true geometry (seal of an 18-mm cup, "
+        "weight as a wrench about the cup, robustness over perturbations: Dex-Net 3.0 style), "
+        "and the training-free disc planarity. It plans one suction point for a single cup. "
+        "Unlike Dex-Net 4.0 it is trained on about "
+        f"{labels.get('candidates', 0):,} labelled candidates of these box heaps (Dex-Net 4.0: "
+        "millions of grasps on thousands of object meshes) and its network is small "
+        f"({g.get('parameters', 0):,} parameters).",
+        "",
+        f"GQ-CNN on the test split's labelled candidates: accuracy "
+        f"{100 * test.get('accuracy', float('nan')):.1f} %, precision "
+        f"{100 * test.get('precision', float('nan')):.1f} %, recall "
+        f"{100 * test.get('recall', float('nan')):.1f} % (positives "
+        f"{100 * test.get('positive_rate', float('nan')):.1f} %); "
+        f"{(cfg.get('baseline') or {}).get('epochs')} epochs on "
+        f"{g.get('train_samples', 0):,} candidates.",
+        "",
+        "Planning time per image of each planner, measured in the same run on this machine's "
+        "CPU: [tables/planning_time.csv](tables/planning_time.csv) (wall-clock, so it is not "
+        "part of the reproducibility check).",
+        "",
+        "CSV version: [tables/table2_centre_distance.csv](tables/table2_centre_distance.csv).",
+        "",
+    ]
+    return out
+
+
 # ---------------------------------------------------------------------- README
 def _commit(manifest: dict) -> str:
     code = manifest.get("code", {})
@@ -614,7 +753,8 @@ def _commit(manifest: dict) -> str:
 
 def render_readme(version: str, upstream: dict[str, tuple[str, dict]], tables: dict[str, Table],
                   figures: dict[str, str], gen_cfg: dict, stats: DatasetStats,
-                  labels: LabelInfo | None = None, trained: TrainInfo | None = None) -> str:
+                  labels: LabelInfo | None = None, trained: TrainInfo | None = None,
+                  baseline: BaselineInfo | None = None) -> str:
     phys = gen_cfg.get("physics", {})
     dt = float(phys.get("time_step", 1 / 240))
     cap = phys.get("max_settle_steps")
@@ -637,6 +777,8 @@ def render_readme(version: str, upstream: dict[str, tuple[str, dict]], tables: d
         out.append(f"| label | not run yet (`make label`) | {NONE} |")
     if trained is None:
         out.append(f"| train | not run yet (`make train`) | {NONE} |")
+    if baseline is None:
+        out.append(f"| baseline | not run yet (`make baseline`) | {NONE} |")
     out += [
         "",
         "Each artifact lives in `data/<stage>/<version>/`; its `manifest.json` holds the full "
@@ -668,6 +810,7 @@ def render_readme(version: str, upstream: dict[str, tuple[str, dict]], tables: d
     out += render_labels(labels, tables, label_figure if label_figure in figures else None)
     pr_figure = "figures/pr_curve.png"
     out += render_train(trained, tables, pr_figure if pr_figure in figures else None)
+    out += render_baseline(baseline, tables, figures)
     out += ["## Figures", ""]
     for rel, caption in figures.items():
         out += [f"![{caption}]({rel})", "", f"*{caption}*", ""]
@@ -678,9 +821,12 @@ def render_readme(version: str, upstream: dict[str, tuple[str, dict]], tables: d
          f"in \"{TABLE1_SECTION}\". " if trained is not None else
          "Table 1 of the paper (precision of the DCNN model's predictions) will appear above "
          "once the training stage has run (`make train`). ")
-        + "Tables 2–3 (2: percentage of grasp points within 30 pixels of a surface centre, ours "
-        "vs. Dex-Net; 3: bin-picking success rate and speed) will appear here when the baseline "
-        "and evaluation stages exist. No numbers are reported for them yet.",
+        + ("Table 2 (optimal grasp points within 30 pixels of a surface centre, ours vs. "
+           f"Dex-Net) is reported above, in \"{TABLE2_SECTION}\". " if baseline is not None else
+           "Table 2 (ours vs. Dex-Net) will appear above once the baseline stage has run "
+           "(`make baseline`). ")
+        + "Table 3 (bin-picking success rate and speed) will appear when the closed-loop "
+        "evaluation stage exists. No numbers are reported for it yet.",
         "",
     ]
     return "\n".join(out)
@@ -737,12 +883,16 @@ def report(cfg: DictConfig) -> Path:
     labels = resolve_labels(root, str(cfg.report.label_version), gen_version)
     trained = resolve_train(Path(cfg.paths.models), str(cfg.report.train_version),
                             labels.version if labels is not None else None)
+    baseline = resolve_baseline(root, str(cfg.report.baseline_version), gen_version,
+                                trained.version if trained is not None else None)
     config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
     upstream = {"generate": gen_version}
     if labels is not None:
         upstream["label"] = labels.version
     if trained is not None:
         upstream["train"] = trained.version
+    if baseline is not None:
+        upstream["baseline"] = baseline.version
     version = compute_version(STAGE, config, upstream)
     gen_cfg = gen_manifest.get("config", {})
 
@@ -761,6 +911,9 @@ def report(cfg: DictConfig) -> Path:
         if trained is not None:
             t = table1_table(trained)
             tables[t.name] = t
+        if baseline is not None:
+            for t in (table2_table(baseline), planning_time_table(baseline)):
+                tables[t.name] = t
         for t in tables.values():
             path = run.work_dir / "tables" / f"{t.name}.csv"
             path.parent.mkdir(parents=True, exist_ok=True)
@@ -790,18 +943,41 @@ def report(cfg: DictConfig) -> Path:
                 "Precision–recall curve of the DCNN on the test split: all predictions pooled "
                 "and ranked by confidence (from the train manifest; Table 1's definition).")
 
+        if baseline is not None:
+            chosen = read_npz(baseline.folder / "chosen.npz")
+            planners = [r["planner"] for r in baseline.metrics["table2"]["rows"]]
+            curve = np.loadtxt(baseline.folder / "table2_curve.csv", delimiter=",", skiprows=1,
+                               ndmin=2)
+            figure_table2_curve(curve[:, 0], {p: curve[:, 1 + k] for k, p in enumerate(planners)},
+                                run.work_dir / "figures" / "table2_curve.png",
+                                baseline.metrics["table2"]["paper"]["within_30px"],
+                                float(baseline.metrics["table2"]["paper"]["radius_px"]))
+            figures["figures/table2_curve.png"] = (
+                "Share of test images whose optimal grasp point lies within r pixels of a true "
+                "surface centre, per planner (Table 2 at r = 30 px; stars: the paper's values).")
+            if num_samples > 0:
+                drawn = figure_planner_points(gen_dir, chosen, planners, num_samples,
+                                              run.work_dir / "figures" / "fig10_planners.png")
+                figures["figures/fig10_planners.png"] = (
+                    f"{drawn} test depth images with each planner's optimal grasp point and the "
+                    "true surface centres (white +), like the paper's Fig. 10.")
+
         used = {"generate": (gen_version, gen_manifest)}
         if labels is not None:
             used["label"] = (labels.version, labels.manifest)
         if trained is not None:
             used["train"] = (trained.version, trained.manifest)
+        if baseline is not None:
+            used["baseline"] = (baseline.version, baseline.manifest)
         readme = render_readme(run.version, used, tables, figures, gen_cfg, stats, labels,
-                               trained)
+                               trained, baseline)
         (run.work_dir / "README.md").write_text(readme)
 
         with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version) as log:
             step = 0
             for t in tables.values():
+                if f"tables/{t.name}.csv" in VOLATILE_FILES:
+                    continue  # wall-clock figures: they would make the logs differ between runs
                 log.set_time(sequences={"step": step}, clock_ns=step)
                 log.log_text(f"report/tables/{t.name}", f"tables/{t.name}.csv\n{t.csv_text()}")
                 step += 1
@@ -815,6 +991,8 @@ def report(cfg: DictConfig) -> Path:
             "generate_version": gen_version,
             "label_version": labels.version if labels is not None else None,
             "train_version": trained.version if trained is not None else None,
+            "baseline_version": baseline.version if baseline is not None else None,
+            "volatile_files": sorted(f for f in VOLATILE_FILES if (run.work_dir / f).is_file()),
             "scenes": dict(stats.scenes),
             "boxes": dict(stats.boxes),
             "grasp_points": ({s: int(labels.splits[s]["grasp_points"]) for s in SPLITS}

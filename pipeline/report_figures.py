@@ -217,3 +217,88 @@ def figure_pr_curve(curve: dict, path: Path, paper: dict | None = None) -> None:
         ax.legend(fontsize=8, loc="upper right")
     ax.set_title("Precision–recall of the DCNN (test split)", fontsize=10)
     _save(fig, path)
+
+
+PLANNER_STYLE = {  # Table 2 / Fig. 10 planners: (colour, marker, legend label)
+    "dcnn": ("tab:blue", "o", "ours (DCNN)"),
+    "gqcnn": ("tab:red", "X", "Dex-Net-style GQ-CNN + CEM"),
+    "planarity": ("tab:orange", "s", "Dex-Net-style planarity + CEM"),
+}
+
+
+def figure_table2_curve(radii: np.ndarray, rates: dict[str, np.ndarray], path: Path,
+                        paper: dict[str, float], paper_radius: float) -> None:
+    """Share of test images whose optimal grasp point lies within r px of a true surface centre,
+    per planner, over r (the baseline's ``table2_curve.csv``), with the paper's 30-px values."""
+    fig = Figure(figsize=(5.6, 4.0), dpi=FIG_DPI, layout="constrained")
+    ax = fig.subplots()
+    for name, rate in rates.items():
+        colour, marker, label = PLANNER_STYLE.get(name, ("black", ".", name))
+        ax.plot(radii, 100.0 * np.asarray(rate), color=colour, lw=1.5, label=label)
+    paper_style = {"ours": ("tab:blue", "paper: ours"), "dexnet4": ("tab:red", "paper: Dex-Net 4.0")}
+    for key, value in paper.items():
+        colour, label = paper_style.get(key, ("black", f"paper: {key}"))
+        ax.scatter([paper_radius], [100.0 * value], color=colour, marker="*", s=120,
+                   edgecolors="black", linewidths=0.6, zorder=4, label=label)
+    ax.axvline(paper_radius, color="grey", lw=0.8, ls="--")
+    ax.set_xlim(float(radii.min()) if len(radii) else 0.0, float(radii.max()) if len(radii) else 1.0)
+    ax.set_ylim(0.0, 101.0)
+    ax.set_xlabel("radius r (pixels)")
+    ax.set_ylabel("optimal points within r of a true surface centre (%)")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=7, loc="lower right")
+    ax.set_title("Table 2 over the radius (test split)", fontsize=10)
+    _save(fig, path)
+
+
+def figure_planner_points(gen_dir: Path, chosen: dict[str, np.ndarray], planners: list[str],
+                          num: int, path: Path) -> int:
+    """Fig. 10-like: test depth images with every planner's optimal grasp point and the true
+    surface centres (white crosses). ``chosen``: the baseline's ``chosen.npz``. Returns the
+    number of images drawn."""
+    from matplotlib.lines import Line2D
+
+    ds = SceneDataset(gen_dir, "test")
+    n = min(num, len(chosen["scene_index"]), len(ds))
+    if n == 0:
+        fig = Figure(figsize=(6.0, 2.0), dpi=FIG_DPI)
+        fig.text(0.5, 0.5, "no test images", ha="center", va="center")
+        _save(fig, path)
+        return 0
+    scenes = [ds[int(chosen["scene_index"][i])] for i in range(n)]
+    starts = np.concatenate([[0], np.cumsum(chosen["num_centres"])])
+    vmin, vmax = _depth_range(scenes)
+    per_row = min(3, n)
+    rows = math.ceil(n / per_row)
+    fig = Figure(figsize=(3.3 * per_row, 3.3 * rows + 0.9), dpi=FIG_DPI, layout="constrained")
+    axes = fig.subplots(rows, per_row, squeeze=False)
+    cmap = matplotlib.colormaps["gray_r"].with_extremes(bad=NO_DATA)
+    for ax in axes.ravel():
+        ax.set_axis_off()
+    for i, scene in enumerate(scenes):
+        ax = axes.ravel()[i]
+        H, W = scene.depth_m.shape
+        ax.imshow(np.where(scene.depth_m > 0, scene.depth_m, np.nan), cmap=cmap, vmin=vmin,
+                  vmax=vmax, interpolation="nearest")
+        centres = chosen["centres"][starts[i]:starts[i + 1]]
+        ax.scatter(centres[:, 0], centres[:, 1], marker="+", s=30, color="white", lw=1.0,
+                   zorder=3)
+        for name in planners:
+            uv = chosen[f"{name}_uv"][i]
+            if np.all(np.isfinite(uv)):
+                colour, marker, _ = PLANNER_STYLE.get(name, ("black", ".", name))
+                ax.scatter([uv[0]], [uv[1]], marker=marker, s=70, color=colour,
+                           edgecolors="black", linewidths=0.7, zorder=4)
+        ax.set_xlim(-0.5, W - 0.5)
+        ax.set_ylim(H - 0.5, -0.5)
+        ax.set_title(f"test #{scene.index}", fontsize=8)
+    handles = [Line2D([], [], linestyle="", marker="+", markersize=8, color="black",
+                      label="true surface centres")]
+    handles += [Line2D([], [], linestyle="", marker=PLANNER_STYLE.get(p, ("k", ".", p))[1],
+                       markersize=8, color=PLANNER_STYLE.get(p, ("black", ".", p))[0],
+                       markeredgecolor="black", label=PLANNER_STYLE.get(p, ("k", ".", p))[2])
+                for p in planners]
+    fig.legend(handles=handles, loc="outside lower center", ncols=len(handles), fontsize=8)
+    fig.suptitle("Optimal grasp points of each planner (paper Fig. 10; light = near)", fontsize=9)
+    _save(fig, path)
+    return n

@@ -2,7 +2,9 @@
 
 Each run goes into a fresh ``paths.root``; for every stage the two artifacts must have the same
 version and the same sha256 for every file. Rerun logs are not byte-stable (chunk ids carry a
-time stamp), so ``log.rrd`` files are compared by content with ``rerun rrd compare``.
+time stamp), so ``log.rrd`` files are compared by content with ``rerun rrd compare``. Files a
+manifest lists in ``metrics.volatile_files`` (measured wall-clock times, e.g. the report's
+``tables/planning_time.csv``) are skipped, and the skip is printed.
 
     python -m pipeline.repro_check [--keep] [--workdir DIR]
 
@@ -23,7 +25,7 @@ from pipeline.tracking import rrd_equal
 from pipeline.view import MODEL_STAGES
 
 # The smoke pipeline, in order; later issues append their stages here.
-STAGES = ("generate", "label", "train", "report")
+STAGES = ("generate", "label", "train", "baseline", "report")
 
 
 
@@ -45,9 +47,13 @@ def compare(root_a: Path, root_b: Path) -> list[str]:
         if a.name != b.name:
             diffs.append(f"{stage}: versions differ ({a.name} vs {b.name})")
             continue
-        fa, fb = load_manifest(a)["files"], load_manifest(b)["files"]
+        ma, mb = load_manifest(a), load_manifest(b)
+        fa, fb = ma["files"], mb["files"]
+        volatile = set((ma.get("metrics") or {}).get("volatile_files") or [])
         for rel in sorted(set(fa) | set(fb)):
-            if rel not in fa or rel not in fb:
+            if rel in volatile and rel in fa and rel in fb:
+                print(f"[repro-check] {stage}/{rel}: skipped (wall-clock timings)")
+            elif rel not in fa or rel not in fb:
                 diffs.append(f"{stage}/{rel}: present in only one run")
             elif rel.endswith(".rrd"):
                 if not rrd_equal(a / rel, b / rel):

@@ -204,7 +204,7 @@ def train(cfg: DictConfig) -> Path:
     resume_config = copy.deepcopy(config)
     resume_config["train"].pop("epochs")
     resume_dir = Path(cfg.paths.models) / STAGE / (RESUME_PREFIX + compute_version(
-        STAGE + "-resume", resume_config, upstream))
+        STAGE + "-resume", resume_config, upstream, code_of=STAGE))
     seed, tc = int(cfg.seed), cfg.train
     progress = bool(cfg.logging.progress)
 

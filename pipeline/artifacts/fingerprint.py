@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ast
 import hashlib
 import subprocess
 import sys
@@ -25,6 +26,7 @@ KEY_PACKAGES = (
     "hydra-core",
     "matplotlib",
     "omegaconf",
+    "scikit-learn",
 )
 
 
@@ -37,13 +39,84 @@ def sha256_file(path: Path, chunk: int = 1 << 20) -> str:
     return h.hexdigest()
 
 
-@lru_cache(maxsize=1)
-def source_hash() -> str:
-    """sha256 over every ``pipeline/**/*.py`` file (relative path and bytes), sorted by path."""
-    h = hashlib.sha256()
-    for path in sorted(PACKAGE_ROOT.rglob("*.py")):
-        if "__pycache__" in path.parts:
+# Plumbing that cannot change a stage's numbers: the resolved config is hashed itself (so the
+# schema and the CLI need not be), and the artifact code writes manifests, not results.
+PLUMBING = ("pipeline.cli", "pipeline.config", "pipeline.artifacts")
+
+
+def _module_path(name: str) -> Path | None:
+    """File of module ``pipeline.a.b`` (``a/b.py`` or ``a/b/__init__.py``), None if none."""
+    rel = Path(*name.split(".")[1:])
+    for path in (PACKAGE_ROOT / rel.with_suffix(".py"), PACKAGE_ROOT / rel / "__init__.py"):
+        if path.is_file():
+            return path
+    return None
+
+
+def _imports(path: Path, name: str) -> set[str]:
+    """``pipeline.*`` modules imported anywhere in a file (module level or inside functions)."""
+    tree = ast.parse(path.read_bytes(), filename=str(path))
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    found: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parts = package.split(".")
+                parts = parts[: len(parts) - (node.level - 1)]
+                base = ".".join(parts + ([base] if base else []))
+            found.add(base)
+            found.update(f"{base}.{a.name}" for a in node.names)  # submodules, if any
+    return {m for m in found if m == "pipeline" or m.startswith("pipeline.")}
+
+
+@lru_cache(maxsize=None)
+def import_closure(module: str) -> tuple[str, ...]:
+    """Every ``pipeline`` module that ``module`` imports, transitively, itself included, and
+    the packages (``__init__``) on the way; sorted. Found by parsing the source (``ast``), so
+    imports inside functions count too."""
+    seen: set[str] = set()
+    todo = [module]
+    while todo:
+        name = todo.pop()
+        if name in seen:
             continue
+        path = _module_path(name)
+        if path is None:
+            continue  # a name imported from a module, not a module itself
+        seen.add(name)
+        parts = name.split(".")
+        todo += [".".join(parts[:k]) for k in range(2, len(parts))]  # parent packages
+        todo += sorted(_imports(path, name))
+    return tuple(sorted(seen))
+
+
+@lru_cache(maxsize=None)
+def source_hash(stage: str | None = None) -> str:
+    """sha256 over the source a stage's result depends on (relative path and bytes, sorted).
+
+    With ``stage``: the files of ``import_closure("pipeline.<stage>")`` except the
+    :data:`PLUMBING` modules, plus the data files (non-Python, e.g. the robot's URDF) kept in
+    the sub-folders of the packages in that closure. So editing the training code leaves the
+    generation artifact's version alone. Without ``stage``, or for a stage with no module of its
+    own: every ``pipeline/**/*.py`` file.
+    """
+    if stage is None or _module_path(f"pipeline.{stage}") is None:
+        files = [p for p in PACKAGE_ROOT.rglob("*.py") if "__pycache__" not in p.parts]
+    else:
+        modules = [m for m in import_closure(f"pipeline.{stage}")
+                   if not any(m == p or m.startswith(p + ".") for p in PLUMBING)]
+        files = [_module_path(m) for m in modules]
+        for m in modules:
+            path = _module_path(m)
+            if path.name == "__init__.py" and m != "pipeline":
+                files += [p for p in path.parent.rglob("*") if p.is_file()
+                          and p.suffix not in (".py", ".pyc") and "__pycache__" not in p.parts
+                          and p.parent != path.parent]
+    h = hashlib.sha256()
+    for path in sorted(set(files)):
         h.update(path.relative_to(PACKAGE_ROOT).as_posix().encode())
         h.update(b"\0")
         h.update(path.read_bytes())

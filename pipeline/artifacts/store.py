@@ -149,7 +149,7 @@ class ArtifactWriter:
             "created": _now_iso(),
             "config": run.config,
             "upstream": run.upstream,
-            "code": {**git_state(), "source_hash": source_hash()},
+            "code": {**git_state(), "source_hash": source_hash(run.stage)},
             "packages": package_versions(),
             "seed": run.seed,
             "files": _hash_files(run.work_dir),

@@ -48,14 +48,18 @@ def stage_config(
 
 
 def compute_version(
-    stage: str, config: Mapping[str, Any], upstream: Mapping[str, str]
+    stage: str, config: Mapping[str, Any], upstream: Mapping[str, str],
+    code_of: str | None = None,
 ) -> str:
-    """Hex key naming the artifact a stage would produce from these inputs."""
+    """Hex key naming the artifact a stage would produce from these inputs.
+
+    The source hash is that of module ``pipeline.<code_of or stage>``'s import closure.
+    """
     payload = {
         "stage": stage,
         "config": config,
         "upstream": dict(sorted(upstream.items())),
-        "source": source_hash(),
+        "source": source_hash(code_of or stage),
         "packages": package_versions(),
     }
     blob = json.dumps(payload, sort_keys=True, separators=(",", ":")).encode()

@@ -228,12 +228,79 @@ class TrainConfig:
 
 
 @dataclass
+class SuctionSchema:
+    """The suction contact model (``pipeline.dexnet.contact.SuctionModelConfig`` documents each
+    field). The cup radius comes from ``hand.cup_diameter``; box density from ``boxes.density``."""
+
+    vacuum_force: float = 12.7  # N per cup
+    friction: float = 0.5
+    compliance: float = 0.003  # m
+    ring_points: int = 16
+    visibility_tolerance: float = 0.003  # m
+    perturbations: int = 16
+    sigma_position: float = 0.002  # m
+    sigma_axis_deg: float = 5.0
+    quality_threshold: float = 0.5
+
+
+@dataclass
+class DexNetSchema:
+    """The Dex-Net-style planner: sampler, cross-entropy method, GQ-CNN, analytic quality."""
+
+    border_px: int = 68
+    max_approach_angle_deg: float = 30.0
+    max_tries: int = 10000
+    sobel_ksize: int = 3
+    num_seed_samples: int = 200
+    num_gmm_samples: int = 50
+    num_iters: int = 3
+    gmm_refit_p: float = 0.25
+    gmm_component_frac: float = 0.4
+    gmm_reg_covar: float = 0.01
+    max_resamples: int = 100
+    crop_window_px: int = 64  # crop of the depth image around a candidate, pixels
+    crop_size: int = 32  # the crop resized to this (GQ-CNN input), pixels
+    crop_depth_scale: float = 0.05  # m: crop input = (depth - candidate depth) / scale
+    crop_missing_value: float = 1.0  # crop input where depth = 0 (no data)
+    pose_depth_scale: float = 0.1  # m: pose input = (candidate depth - D_ground) / scale
+    width: int = 16  # channels of the first conv layer (doubled per block)
+    fc: int = 128
+    planarity_sigma: float = 0.001  # m
+    planarity_min_coverage: float = 0.8
+    object_margin: float = 0.005  # m: object mask = depth at least this above the bin floor
+
+
+@dataclass
+class BaselineConfig:
+    """The comparison stage (``pipeline.baseline``): GQ-CNN training and Table 2."""
+
+    generate_version: str = "latest"
+    train_version: str = "latest"  # the project's planner for Table 2; "none" leaves it out
+    candidates_per_scene: int = 32  # sampled and labelled per training / validation scene
+    max_train_scenes: int = 0  # 0 = the whole train split
+    epochs: int = MISSING
+    batch_size: int = 64
+    lr: float = 1.0e-3
+    weight_decay: float = 1.0e-4
+    num_threads: int = 2
+    variants: List[str] = field(default_factory=lambda: ["gqcnn", "planarity"])
+    max_eval_images: int = 0  # 0 = the whole test split
+    table2_radius_px: float = 30.0
+    curve_min_px: int = 5
+    curve_max_px: int = 50
+    log_samples: int = 8
+    workers: int = 0
+    force: bool = False
+
+
+@dataclass
 class ReportConfig:
     """The report stage: which artifacts to gather and how many sample images to draw."""
 
     generate_version: str = "latest"
     label_version: str = "latest"  # no label artifact at all: the report leaves labels out
     train_version: str = "latest"  # no train artifact at all: the report leaves Table 1 out
+    baseline_version: str = "latest"  # no baseline artifact at all: the report leaves Table 2 out
     num_sample_images: int = 6
     force: bool = False
 
@@ -266,6 +333,9 @@ class PipelineConfig:
     report: ReportConfig = field(default_factory=ReportConfig)
     model: ModelConfig = field(default_factory=ModelConfig)
     train: TrainConfig = field(default_factory=TrainConfig)
+    suction: SuctionSchema = field(default_factory=SuctionSchema)
+    dexnet: DexNetSchema = field(default_factory=DexNetSchema)
+    baseline: BaselineConfig = field(default_factory=BaselineConfig)
     logging: LoggingConfig = field(default_factory=LoggingConfig)
 
 

@@ -1,0 +1,577 @@
+"""The Dex-Net-style comparison stage (paper Sec. 6, 8.1.1, Table 2, Fig. 10).
+
+    python -m pipeline.baseline experiment=smoke [baseline.train_version=<version>|none]
+
+Dex-Net's weights and datasets cannot be downloaded here, so the comparison planner is built
+the way Dex-Net 3.0/4.0 build theirs, on this project's own simulated heaps
+(``pipeline.dexnet``; README "The Dex-Net-style baseline"):
+
+1. **Candidate labels** (scene-parallel, like labelling): on every train / val / test scene of
+   the generation artifact, ``baseline.candidates_per_scene`` suction candidates are sampled
+   on the depth image as the policy samples them, and each gets the robust quality of the
+   suction contact model computed from the simulator's true box geometry, mass and centre of
+   mass (``pipeline.dexnet.contact``). Quality ≥ ``suction.quality_threshold``: a positive.
+2. **GQ-CNN** (``pipeline.dexnet.gqcnn``): trained on the train split's candidates (crop +
+   pose → robust or not), Adam, binary cross-entropy; validation loss and accuracy per epoch.
+3. **Table 2** on the test split: the project's DCNN planner (the training artifact
+   ``baseline.train_version``) and each variant in ``baseline.variants`` (``gqcnn``: the CEM
+   scored by the GQ-CNN; ``planarity``: the CEM scored by the analytic disc planarity) plan on
+   the same images; each optimal point's distance to the nearest true surface centre
+   (``pipeline.planner.centre_distance``), the share within 30 px and the curve over 5–50 px,
+   and the planning time per image of every planner, measured in the same run.
+
+Artifact (``data/baseline/<version>/``)::
+
+    candidates/<split>-<shard>.npz   labelled candidates, aligned with the generation shards
+    gqcnn.pt                         GQ-CNN weights + network and crop config (weights_only)
+    table2.csv, table2_curve.csv     Table 2 and its curve (no timings: they are in the manifest)
+    chosen.npz                       per test image: every planner's point, score and distance
+    log.rrd, log.mcap                training curves, labelled candidates, test images with
+                                     every planner's point, the CEM's iterations and the truth
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import math
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import hydra
+import numpy as np
+import torch
+from omegaconf import DictConfig, OmegaConf
+
+from pipeline.artifacts import compute_version, load_manifest, resolve_artifact, run_stage, stage_config
+from pipeline.artifacts.store import ArtifactError, StageRun
+from pipeline.cli import CONF_DIR, data_root, default_workers, stage_main
+from pipeline.dataset.scenes import SPLIT_CODES, SPLITS, Scene, SceneDataset
+from pipeline.dataset.storage import read_npz, write_npz
+from pipeline.dexnet.contact import REASONS, SuctionModelConfig, evaluate_contacts, robust_quality
+from pipeline.dexnet.gqcnn import GQCNN, candidate_inputs, count_parameters, predict_quality
+from pipeline.dexnet.planner import (
+    MODEL_FILE, DexNetPlanner, crop_config, gqcnn_config, sampler_config, workspace,
+)
+from pipeline.dexnet.sampling import Candidates, point_cloud_image, sample_candidates
+from pipeline.executor import map_shards
+from pipeline.labelling.surfaces import true_visible_faces
+from pipeline.planner.centre_distance import (
+    PAPER_RADIUS_PX, PAPER_TABLE2, nearest_centre_distance, within_curve, within_rate,
+)
+from pipeline.tracking import StageLog
+
+STAGE = "baseline"
+SECTIONS = ("seed", "camera", "bin", "boxes", "physics", "hand", "surfaces", "suction", "dexnet",
+            "baseline")
+NOT_AFFECTING_RESULT = ("baseline.generate_version", "baseline.train_version",
+                        "baseline.workers", "baseline.force", "baseline.log_samples")
+OURS = "dcnn"
+PLANNER_NAMES = {OURS: "Ours (DCNN, two cups)", "gqcnn": "Dex-Net-style GQ-CNN + CEM",
+                 "planarity": "Dex-Net-style planarity + CEM"}
+PLANNER_COLORS = {OURS: (60, 120, 255), "gqcnn": (255, 80, 40), "planarity": (255, 200, 0)}
+EVAL_SEED = 11  # the CEM's generator for test image i: (seed, EVAL_SEED, i)
+LABEL_SEED = 5  # candidate sampling and robustness for a scene: (seed, LABEL_SEED, split, index)
+
+# One row per labelled candidate in candidates/<split>-<shard>.npz:
+CANDIDATE_FIELDS = {
+    "scene_index": "(M,) int64 scene index within the split",
+    "uv": "(M, 2) int64 pixel (u, v)",
+    "point": "(M, 3) float64 contact point, camera frame, m",
+    "axis": "(M, 3) float64 approach axis (into the object), camera frame",
+    "depth": "(M,) float64 m", "angle": "(M,) float64 rad from the optical axis",
+    "quality": "(M,) float64 robust quality in [0, 1]",
+    "label": "(M,) bool quality >= suction.quality_threshold",
+    "reason": "(M,) int8 unperturbed contact outcome, index into reasons",
+}
+
+
+# --------------------------------------------------------------------------------------------
+# Candidate labels
+
+
+def suction_config(cfg) -> SuctionModelConfig:
+    s = cfg.suction
+    return SuctionModelConfig(
+        cup_radius=float(cfg.hand.cup_diameter) / 2.0, vacuum_force=float(s.vacuum_force),
+        friction=float(s.friction), compliance=float(s.compliance),
+        ring_points=int(s.ring_points), visibility_tolerance=float(s.visibility_tolerance),
+        gravity=abs(float(cfg.physics.gravity)), density=float(cfg.boxes.density),
+        perturbations=int(s.perturbations), sigma_position=float(s.sigma_position),
+        sigma_axis_deg=float(s.sigma_axis_deg), quality_threshold=float(s.quality_threshold))
+
+
+def gravity_in_camera(T_world_cam: np.ndarray) -> np.ndarray:
+    """World gravity direction (0, 0, −1) in the camera frame: (3,) unit vector."""
+    return np.asarray(T_world_cam, np.float64)[:3, :3].T @ np.array([0.0, 0.0, -1.0])
+
+
+def label_scene_candidates(scene: Scene, cfg, count: int) -> dict[str, np.ndarray]:
+    """Sample ``count`` candidates on one scene as the policy would and label them."""
+    rng = np.random.default_rng([int(cfg.seed), LABEL_SEED, SPLIT_CODES[scene.split], scene.index])
+    ws = workspace(cfg, scene.T_world_cam)
+    mask = ws.object_mask(scene.depth_m, scene.intrinsics)
+    cloud = point_cloud_image(scene.depth_m, scene.intrinsics, sampler_config(cfg),
+                              object_mask=mask)
+    cands = sample_candidates(cloud, count, rng, sampler_config(cfg))
+    model = suction_config(cfg)
+    g = gravity_in_camera(scene.T_world_cam)
+    args = (scene.depth_m, scene.mask, scene.intrinsics, scene.boxes, g, model)
+    if len(cands):
+        quality = robust_quality(cands.point, cands.axis, *args, rng=rng)
+        reason = evaluate_contacts(cands.point, cands.axis, *args).reason
+    else:
+        quality, reason = np.zeros(0), np.zeros(0, np.int8)
+    return {"scene_index": np.full(len(cands), scene.index, np.int64),
+            "uv": cands.uv.astype(np.int64).reshape(-1, 2),
+            "point": cands.point.reshape(-1, 3), "axis": cands.axis.reshape(-1, 3),
+            "depth": cands.depth.astype(np.float64), "angle": cands.angle.astype(np.float64),
+            "quality": np.asarray(quality, np.float64),
+            "label": np.asarray(quality, np.float64) >= model.quality_threshold,
+            "reason": np.asarray(reason, np.int8)}
+
+
+@dataclass
+class CandidateTask:
+    split: str
+    first: int
+    count: int
+    out_path: str
+
+
+_STATE: dict = {}
+
+
+def _init_worker(cfg_obj, gen_dir: str) -> None:
+    _STATE.clear()
+    _STATE.update(cfg=cfg_obj, gen_dir=Path(gen_dir))
+
+
+def label_shard(task: CandidateTask) -> dict:
+    """Label one shard's scenes; writes the shard file, returns counts for the manifest."""
+    cfg = _STATE["cfg"]
+    ds = SceneDataset(_STATE["gen_dir"], task.split)
+    cols: dict[str, list] = {}
+    for index in range(task.first, task.first + task.count):
+        rows = label_scene_candidates(ds[index], cfg, int(cfg.baseline.candidates_per_scene))
+        for k, v in rows.items():
+            cols.setdefault(k, []).append(v)
+    arrays = {k: np.concatenate(v) for k, v in cols.items()}
+    Path(task.out_path).parent.mkdir(parents=True, exist_ok=True)
+    write_npz(Path(task.out_path), arrays)
+    return {"split": task.split, "scenes": task.count, "candidates": int(len(arrays["label"])),
+            "positives": int(arrays["label"].sum()),
+            "reasons": np.bincount(arrays["reason"].astype(np.int64),
+                                   minlength=len(REASONS)).tolist()}
+
+
+def plan_tasks(gen_dir: Path, out_dir: Path, max_train_scenes: int) -> list[CandidateTask]:
+    index = json.loads((gen_dir / "index.json").read_text())
+    tasks = []
+    for split in SPLITS:
+        budget = max_train_scenes if (split == "train" and max_train_scenes > 0) else None
+        for shard in index["splits"][split]:
+            count = shard["count"] if budget is None else min(shard["count"], budget)
+            if count <= 0:
+                break
+            tasks.append(CandidateTask(split, shard["first"], count,
+                                       str(out_dir / "candidates" / Path(shard["file"]).name)))
+            if budget is not None:
+                budget -= count
+    return tasks
+
+
+def load_candidates(folder: Path, split: str) -> dict[str, np.ndarray]:
+    """Every labelled candidate of a split, concatenated over its shards."""
+    meta = json.loads((folder / "candidates.json").read_text())
+    parts = [read_npz(folder / f) for f in meta["splits"][split]]
+    if not parts:
+        return {}
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+
+# --------------------------------------------------------------------------------------------
+# GQ-CNN training
+
+
+def _as_candidates(rows: dict, idx: np.ndarray) -> Candidates:
+    return Candidates(uv=rows["uv"][idx], point=rows["point"][idx], axis=rows["axis"][idx],
+                      depth=rows["depth"][idx], angle=rows["angle"][idx])
+
+
+def build_inputs(gen_dir: Path, split: str, rows: dict, crop) -> tuple[np.ndarray, np.ndarray]:
+    """Crops (M, 1, S, S) float16 and poses (M, 2) float32 of a split's candidates, in row order."""
+    m = len(rows.get("label", []))
+    crops = np.empty((m, 1, crop.size, crop.size), np.float16)
+    poses = np.empty((m, 2), np.float32)
+    if m == 0:
+        return crops, poses
+    ds = SceneDataset(gen_dir, split)
+    order = np.argsort(rows["scene_index"], kind="stable")
+    bounds = np.flatnonzero(np.diff(rows["scene_index"][order])) + 1
+    for group in np.split(order, bounds):
+        depth = ds[int(rows["scene_index"][group[0]])].depth_m
+        c, p = candidate_inputs(depth, _as_candidates(rows, group), crop)
+        crops[group], poses[group] = c.astype(np.float16), p
+    return crops, poses
+
+
+def _evaluate(net: GQCNN, crops, poses, labels) -> dict:
+    if len(labels) == 0:
+        return {"loss": float("nan"), "accuracy": float("nan")}
+    q = predict_quality(net, crops.astype(np.float32), poses)
+    eps = 1e-7
+    y = labels.astype(np.float64)
+    loss = -np.mean(y * np.log(q + eps) + (1 - y) * np.log(1 - q + eps))
+    pred = q >= 0.5
+    tp = int(np.sum(pred & labels))
+    return {"loss": float(loss), "accuracy": float(np.mean(pred == labels)),
+            "precision": float(tp / max(int(pred.sum()), 1)),
+            "recall": float(tp / max(int(labels.sum()), 1)),
+            "positive_rate": float(np.mean(labels))}
+
+
+def train_gqcnn(cfg, train_inputs, val_inputs, progress: bool) -> tuple[GQCNN, dict]:
+    """Adam on binary cross-entropy; data order of epoch e from (seed, e). Returns net, history."""
+    from tqdm import tqdm
+
+    b = cfg.baseline
+    torch.manual_seed(int(cfg.seed))
+    torch.set_num_threads(int(b.num_threads))
+    torch.use_deterministic_algorithms(True)
+    net = GQCNN(gqcnn_config(cfg))
+    opt = torch.optim.Adam(net.parameters(), lr=float(b.lr), weight_decay=float(b.weight_decay))
+    crops, poses, labels = train_inputs
+    n = len(labels)
+    history: dict = {"step_loss": [], "train_loss": [], "val": []}
+    t0 = time.perf_counter()
+    for epoch in range(int(b.epochs)):
+        net.train()
+        gen = torch.Generator().manual_seed(int(cfg.seed) * 1_000_003 + epoch)
+        order = torch.randperm(n, generator=gen).numpy()
+        total = 0.0
+        steps = range(0, n, int(b.batch_size))
+        for start in tqdm(steps, desc=f"{STAGE} epoch {epoch + 1}/{b.epochs}", unit="batch",
+                          disable=not progress, leave=False):
+            idx = np.sort(order[start:start + int(b.batch_size)])
+            x = torch.from_numpy(crops[idx].astype(np.float32))
+            p = torch.from_numpy(poses[idx])
+            y = torch.from_numpy(labels[idx].astype(np.float32))
+            loss = torch.nn.functional.binary_cross_entropy_with_logits(net(x, p), y)
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            history["step_loss"].append(loss.item())
+            total += history["step_loss"][-1] * len(idx)
+        history["train_loss"].append(total / max(n, 1))
+        history["val"].append(_evaluate(net, *val_inputs))
+    history["train_s"] = time.perf_counter() - t0
+    history["samples_per_s"] = int(b.epochs) * n / max(history["train_s"], 1e-9)
+    return net.eval(), history
+
+
+# --------------------------------------------------------------------------------------------
+# Table 2
+
+
+def make_planners(cfg, gen: SceneDataset, model_dir: Path, train_dir: Path | None) -> dict:
+    """name → plan(depth_m, intrinsics, index) → list of candidates (G_opt first)."""
+    planners: dict = {}
+    if train_dir is not None:
+        from pipeline.planner.planner import Planner
+        dcnn = Planner.load(train_dir, device="cpu")
+        planners[OURS] = lambda depth, intr, i: dcnn.plan(depth, intr)
+    for variant in cfg.baseline.variants:
+        dex = DexNetPlanner.from_config(cfg, variant, gen.T_world_cam,
+                                        model_dir if variant == "gqcnn" else None)
+
+        def plan(depth, intr, i, dex=dex):
+            return dex.plan(depth, intr, rng=np.random.default_rng([int(cfg.seed), EVAL_SEED, i]))
+        planners[variant] = plan
+    return planners
+
+
+def evaluate_table2(cfg, gen_dir: Path, model_dir: Path, train_dir: Path | None,
+                    progress: bool) -> dict:
+    """Every planner on the same test images: chosen points, distances, planning times."""
+    from tqdm import tqdm
+
+    gen = SceneDataset(gen_dir, "test")
+    n = len(gen) if int(cfg.baseline.max_eval_images) <= 0 else min(
+        len(gen), int(cfg.baseline.max_eval_images))
+    planners = make_planners(cfg, gen, model_dir, train_dir)
+    min_px = int(cfg.surfaces.truth_min_visible_px)
+    out = {"scene_index": np.arange(n, dtype=np.int64), "num_centres": np.zeros(n, np.int64),
+           "centres": []}
+    times = {name: [] for name in planners}
+    for name in planners:
+        out[f"{name}_uv"] = np.full((n, 2), np.nan)
+        out[f"{name}_score"] = np.full(n, np.nan)
+        out[f"{name}_dist"] = np.full(n, np.nan)
+    for i in tqdm(range(n), desc=f"{STAGE} table 2", unit="image", disable=not progress):
+        scene = gen[i]
+        faces = true_visible_faces(scene.depth_m, scene.mask, scene.intrinsics, scene.boxes,
+                                   min_visible_px=min_px)
+        centres = np.array([f.center_px for f in faces], np.float64).reshape(-1, 2)
+        out["num_centres"][i] = len(centres)
+        out["centres"].append(centres)
+        for name, plan in planners.items():
+            t0 = time.perf_counter()
+            cands = plan(scene.depth_m, scene.intrinsics, i)
+            times[name].append(time.perf_counter() - t0)
+            uv = np.array([cands[0].u, cands[0].v]) if cands else None
+            if uv is not None:
+                out[f"{name}_uv"][i] = uv
+                out[f"{name}_score"][i] = cands[0].score
+            out[f"{name}_dist"][i] = nearest_centre_distance(uv, centres)
+    out["times"] = times
+    out["planners"] = list(planners)
+    return out
+
+
+def table2_rows(result: dict, radius_px: float, radii: np.ndarray) -> tuple[list, list]:
+    rows, curve = [], []
+    for name in result["planners"]:
+        d = result[f"{name}_dist"]
+        scored = ~np.isnan(d)
+        finite = d[np.isfinite(d)]
+        rows.append({"planner": name, "name": PLANNER_NAMES[name],
+                     "images": int(scored.sum()),
+                     "no_grasp": int(np.sum(np.isinf(d))),
+                     f"within_{radius_px:g}px": round(within_rate(d, radius_px), 6),
+                     "median_distance_px": round(float(np.median(finite)), 3) if len(finite)
+                     else float("nan")})
+    for k, r in enumerate(radii):
+        curve.append([int(r)] + [round(float(within_curve(result[f"{name}_dist"],
+                                                          np.array([r]))[0]), 6)
+                                 for name in result["planners"]])
+    return rows, curve
+
+
+def _write_csv(path: Path, header: list[str], rows: list[list]) -> None:
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f, lineterminator="\n")
+        w.writerow(header)
+        w.writerows(rows)
+
+
+# --------------------------------------------------------------------------------------------
+# Logs
+
+
+def _quality_colors(q: np.ndarray) -> np.ndarray:
+    q = np.clip(np.asarray(q, np.float64), 0.0, 1.0)
+    return np.stack([255 * (1 - q), 255 * q, np.full_like(q, 40)], axis=1).astype(np.uint8)
+
+
+def _log_candidates(log: StageLog, gen_dir: Path, folder: Path, count: int) -> None:
+    """A few train scenes with their labelled candidates coloured by quality (red 0 → green 1)."""
+    rows = load_candidates(folder, "train")
+    if not rows:
+        return
+    ds = SceneDataset(gen_dir, "train")
+    for i in range(min(count, len(ds))):
+        scene = ds[i]
+        sel = rows["scene_index"] == i
+        log.set_time(sequences={"labelled_scene": i}, clock_ns=i * 1_000_000_000)
+        log.log_camera("labels/camera", scene.intrinsics, scene.T_world_cam)
+        log.log_depth("labels/camera/depth", scene.depth_m)
+        log.log_points("labels/camera/candidates", rows["point"][sel],
+                       _quality_colors(rows["quality"][sel]))
+        reasons = np.bincount(rows["reason"][sel].astype(np.int64), minlength=len(REASONS))
+        log.log_text("log", f"train scene {i}: {int(sel.sum())} candidates, "
+                            f"{int(rows['label'][sel].sum())} robust; contact outcomes: "
+                            + ", ".join(f"{REASONS[k]} {c}" for k, c in enumerate(reasons) if c))
+
+
+def _log_history(log: StageLog, history: dict, steps_per_epoch: int) -> None:
+    for step, loss in enumerate(history["step_loss"]):
+        log.set_time(sequences={"step": step}, clock_ns=step * 1_000_000)
+        log.log_scalar("gqcnn/step/loss", loss)
+    for e, (tr, val) in enumerate(zip(history["train_loss"], history["val"])):
+        step = (e + 1) * steps_per_epoch
+        log.set_time(sequences={"epoch": e + 1, "step": step}, clock_ns=step * 1_000_000)
+        log.log_scalar("gqcnn/epoch/train_loss", tr)
+        for k in ("loss", "accuracy"):
+            if math.isfinite(val[k]):
+                log.log_scalar(f"gqcnn/epoch/val_{k}", val[k])
+
+
+def _log_table2_samples(log: StageLog, cfg, gen_dir: Path, model_dir: Path, result: dict,
+                        count: int) -> None:
+    """Test images with every planner's point, the true centres and the CEM's iterations."""
+    gen = SceneDataset(gen_dir, "test")
+    dex = None
+    if "gqcnn" in result["planners"]:
+        dex = DexNetPlanner.from_config(cfg, "gqcnn", gen.T_world_cam, model_dir)
+    for i in range(min(count, len(result["scene_index"]))):
+        scene = gen[i]
+        log.set_time(sequences={"test_image": i}, clock_ns=(10_000 + i) * 1_000_000_000)
+        log.log_camera("table2/camera", scene.intrinsics, scene.T_world_cam)
+        log.log_depth("table2/camera/depth", scene.depth_m)
+        pts = _pixels_to_points(scene, result["centres"][i])
+        log.log_points("table2/camera/true_centres", pts,
+                       np.full((len(pts), 3), 255, np.uint8))
+        parts = []
+        for name in result["planners"]:
+            uv = result[f"{name}_uv"][i]
+            if np.all(np.isfinite(uv)):
+                p = _pixels_to_points(scene, uv.reshape(1, 2))
+                log.log_points(f"table2/camera/{name}", p,
+                               np.array([PLANNER_COLORS[name]], np.uint8))
+            parts.append(f"{name} {result[f'{name}_dist'][i]:.1f} px")
+        if dex is not None:
+            cem = dex.run_cem(scene.depth_m, scene.intrinsics,
+                              np.random.default_rng([int(cfg.seed), EVAL_SEED, i]))
+            for k, it in enumerate(cem.iterations):
+                log.log_points(f"table2/camera/cem/iteration_{k}", it.candidates.point,
+                               _quality_colors(it.scores))
+        log.log_text("log", f"test image {i}: distance to the nearest true centre: "
+                            + ", ".join(parts))
+
+
+def _pixels_to_points(scene: Scene, uv: np.ndarray) -> np.ndarray:
+    uv = np.asarray(uv, np.float64).reshape(-1, 2)
+    h, w = scene.depth_m.shape
+    u = np.clip(np.round(uv[:, 0]).astype(int), 0, w - 1)
+    v = np.clip(np.round(uv[:, 1]).astype(int), 0, h - 1)
+    z = scene.depth_m[v, u].astype(np.float64)
+    k = scene.intrinsics
+    return np.stack([(uv[:, 0] - k.cx) / k.fx * z, (uv[:, 1] - k.cy) / k.fy * z, z],
+                    axis=1).astype(np.float32)
+
+
+# --------------------------------------------------------------------------------------------
+# The stage
+
+
+def _train_artifact(cfg) -> Path | None:
+    """The project's planner for Table 2, or None (``train_version=none``, or no artifact and
+    ``latest`` asked for)."""
+    version = str(cfg.baseline.train_version)
+    if version.lower() == "none":
+        return None
+    models = Path(cfg.paths.models)
+    try:
+        return resolve_artifact(models, "train", version)
+    except ArtifactError:
+        if version != "latest":
+            raise
+        print("[baseline] no training artifact yet: Table 2 leaves the project's planner out "
+              "(run `make train` first, or pass baseline.train_version=none to silence this).")
+        return None
+
+
+def baseline(cfg: DictConfig) -> Path:
+    """Label candidates, train the GQ-CNN, evaluate Table 2; returns the artifact folder."""
+    gen_dir = resolve_artifact(data_root(cfg), STAGE_UPSTREAM, cfg.baseline.generate_version)
+    for variant in cfg.baseline.variants:
+        if variant not in PLANNER_NAMES or variant == OURS:
+            raise ValueError(f"baseline.variants has {variant!r}: choose from gqcnn, planarity")
+    train_dir = _train_artifact(cfg)
+    upstream = {"generate": gen_dir.name}
+    if train_dir is not None:
+        upstream["train"] = train_dir.name
+        trained_on = load_manifest(train_dir)["upstream"].get("label")
+        if trained_on is not None:
+            upstream["train_label"] = trained_on
+    config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
+    version = compute_version(STAGE, config, upstream=upstream)
+    cfg_obj = OmegaConf.to_object(cfg)
+    workers = default_workers(cfg_obj.baseline.workers)
+    progress = bool(cfg_obj.logging.progress)
+
+    def body(run: StageRun) -> None:
+        tasks = plan_tasks(gen_dir, run.work_dir, int(cfg.baseline.max_train_scenes))
+        meta = {"splits": {s: [] for s in SPLITS}, "fields": CANDIDATE_FIELDS,
+                "reasons": list(REASONS)}
+        for t in tasks:
+            meta["splits"][t.split].append(Path(t.out_path).relative_to(run.work_dir).as_posix())
+        (run.work_dir / "candidates.json").write_text(json.dumps(meta, indent=2) + "\n")
+        t0 = time.perf_counter()
+        summaries = list(map_shards(label_shard, tasks, init=_init_worker,
+                                    initargs=(cfg_obj, str(gen_dir)), workers=workers,
+                                    desc=f"{STAGE} labels", progress=progress))
+        label_s = time.perf_counter() - t0
+        n_scenes = sum(t.count for t in tasks)
+        run.timings.update({"label_s": round(label_s, 3), "label_workers": workers,
+                            "label_scenes_per_s": round(n_scenes / max(label_s, 1e-9), 3)})
+        labels_metrics = {}
+        for split in SPLITS:
+            ss = [s for s in summaries if s["split"] == split]
+            reasons = np.sum([s["reasons"] for s in ss], axis=0) if ss else np.zeros(len(REASONS))
+            cands = sum(s["candidates"] for s in ss)
+            labels_metrics[split] = {
+                "scenes": sum(s["scenes"] for s in ss), "candidates": cands,
+                "positives": sum(s["positives"] for s in ss),
+                "contact_outcomes": {REASONS[k]: int(c) for k, c in enumerate(reasons)}}
+        run.metrics["candidate_labels"] = labels_metrics
+
+        crop = crop_config(cfg)
+        inputs = {}
+        for split in ("train", "val", "test"):
+            rows = load_candidates(run.work_dir, split)
+            c, p = build_inputs(gen_dir, split, rows, crop)
+            inputs[split] = (c, p, rows.get("label", np.zeros(0, bool)).astype(bool))
+        if len(inputs["train"][2]) == 0:
+            raise ValueError("no candidates in the train split: the generation artifact has no "
+                             "boxes to sample on (check generate.num_scenes and boxes.max_count)")
+        net, history = train_gqcnn(cfg, inputs["train"], inputs["val"], progress)
+        torch.save({"network": dataclasses.asdict(net.cfg), "crop": dataclasses.asdict(crop),
+                    "state_dict": net.state_dict()}, run.work_dir / MODEL_FILE)
+        run.timings.update({"gqcnn_train_s": round(history["train_s"], 3),
+                            "gqcnn_samples_per_s": round(history["samples_per_s"], 1)})
+        run.metrics["gqcnn"] = {
+            "parameters": count_parameters(net),
+            "train_samples": int(len(inputs["train"][2])),
+            "train_loss": [round(x, 6) for x in history["train_loss"]],
+            "val": [{k: round(v, 6) for k, v in e.items()} for e in history["val"]],
+            "test": {k: round(v, 6) for k, v in _evaluate(net, *inputs["test"]).items()}}
+        del inputs
+
+        result = evaluate_table2(cfg, gen_dir, run.work_dir, train_dir, progress)
+        radius = float(cfg.baseline.table2_radius_px)
+        radii = np.arange(int(cfg.baseline.curve_min_px), int(cfg.baseline.curve_max_px) + 1)
+        rows, curve = table2_rows(result, radius, radii)
+        _write_csv(run.work_dir / "table2.csv", list(rows[0]) if rows else ["planner"],
+                   [list(r.values()) for r in rows])
+        _write_csv(run.work_dir / "table2_curve.csv", ["radius_px", *result["planners"]], curve)
+        chosen = {k: v for k, v in result.items()
+                  if isinstance(v, np.ndarray)}
+        chosen["centres"] = (np.concatenate(result["centres"]) if result["centres"]
+                             else np.zeros((0, 2)))
+        write_npz(run.work_dir / "chosen.npz", chosen)
+        run.metrics["table2"] = {"radius_px": radius, "rows": rows,
+                                 "paper": {"within_30px": PAPER_TABLE2,
+                                           "radius_px": PAPER_RADIUS_PX}}
+        run.timings["planning_ms_per_image"] = {
+            name: {"mean": round(1000 * float(np.mean(t)), 2),
+                   "median": round(1000 * float(np.median(t)), 2),
+                   "p90": round(1000 * float(np.percentile(t, 90)), 2)} if t else {}
+            for name, t in result["times"].items()}
+        run.timings["torch_threads"] = torch.get_num_threads()
+
+        with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version) as log:
+            steps = math.ceil(len(history["step_loss"]) / max(int(cfg.baseline.epochs), 1))
+            _log_history(log, history, steps)
+            _log_candidates(log, gen_dir, run.work_dir, int(cfg.baseline.log_samples))
+            _log_table2_samples(log, cfg, gen_dir, run.work_dir, result,
+                                int(cfg.baseline.log_samples))
+
+    return run_stage(data_root(cfg), STAGE, version, config, upstream, body,
+                     seed=cfg_obj.seed, force=cfg_obj.baseline.force)
+
+
+STAGE_UPSTREAM = "generate"
+
+
+@hydra.main(config_path=CONF_DIR, config_name="baseline", version_base="1.3")
+def main(cfg: DictConfig) -> None:
+    stage_main(baseline)(cfg)
+
+
+if __name__ == "__main__":
+    main()

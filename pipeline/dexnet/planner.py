@@ -1,0 +1,218 @@
+"""The Dex-Net-style suction planner: depth image → one suction grasp, by the cross-entropy method.
+
+    planner = DexNetPlanner.from_config(cfg, "gqcnn", model_dir=Path("data/baseline/latest"))
+    grasps = planner.plan(depth_m, intrinsics)      # [] or [SuctionGrasp]: G_opt = grasps[0]
+
+The same call as the project's planner (``pipeline.planner.Planner.plan``): a depth image in
+metres and the intrinsics in, ranked candidates out (here at most one: the CEM's argmax). A
+``SuctionGrasp`` has ``u``, ``v``, ``score``, ``depth`` and ``normal_cam`` like the project's
+``GraspCandidate``; its ``grasp_class`` is ``None``: Dex-Net plans for a single cup and has no
+grasp patterns.
+
+Steps (gqcnn's ``CrossEntropyRobustGraspingPolicy`` with a suction sampler):
+
+1. **Segmask** (Dex-Net plans on a mask of the objects, from background subtraction): pixels
+   with depth whose back-projected point lies inside the bin's inner walls and at least
+   ``dexnet.object_margin`` above the bin floor. Needs the camera pose ``T_world_cam`` (the home
+   pose) and the bin geometry.
+2. **Point-cloud image and normals** (``pipeline.dexnet.sampling``).
+3. **CEM** over suction candidates (``pipeline.dexnet.cem``) scored by one quality:
+   ``gqcnn`` (the trained GQ-CNN, ``pipeline.dexnet.gqcnn``) or ``planarity`` (the analytic disc
+   approach planarity, ``pipeline.dexnet.quality``; no training).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from pipeline.camera.geometry import Intrinsics
+from pipeline.dexnet.cem import CEMConfig, CEMResult, cross_entropy_method
+from pipeline.dexnet.gqcnn import (
+    GQCNN, CropConfig, GQCNNConfig, candidate_inputs, predict_quality,
+)
+from pipeline.dexnet.quality import PlanarityConfig, disc_planarity
+from pipeline.dexnet.sampling import Candidates, PointCloudImage, SamplerConfig, point_cloud_image
+
+VARIANTS = ("gqcnn", "planarity")
+MODEL_FILE = "gqcnn.pt"
+
+
+@dataclass
+class SuctionGrasp:
+    """One suction grasp. ``u``, ``v``: pixels; ``score``: the quality (GQ-CNN probability or
+    planarity) in [0, 1]; ``depth``: metres; ``point_cam``: (3,) contact point, camera frame;
+    ``normal_cam``: (3,) unit surface normal towards the camera; ``axis_cam`` = −normal: the
+    approach axis; ``angle``: rad between the axis and the optical axis."""
+
+    u: float
+    v: float
+    score: float
+    depth: float
+    point_cam: np.ndarray
+    normal_cam: np.ndarray
+    axis_cam: np.ndarray
+    angle: float
+    grasp_class: None = None
+
+
+@dataclass(frozen=True)
+class Workspace:
+    """The bin interior, for the segmask: inner half-extents (m) and the camera pose."""
+
+    half_x: float
+    half_y: float
+    object_margin: float
+    T_world_cam: np.ndarray  # (4, 4) camera pose in the world frame at planning time
+
+    def object_mask(self, depth_m: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
+        """(H, W) bool: pixels with data inside the bin and above its floor (world z = 0)."""
+        h, w = depth_m.shape
+        u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+        z = depth_m.astype(np.float64)
+        pts = np.stack([(u - intrinsics.cx) / intrinsics.fx * z,
+                        (v - intrinsics.cy) / intrinsics.fy * z, z], axis=-1)
+        R, t = self.T_world_cam[:3, :3], self.T_world_cam[:3, 3]
+        world = pts @ R.T + t
+        return ((z > 0) & (np.abs(world[..., 0]) < self.half_x)
+                & (np.abs(world[..., 1]) < self.half_y) & (world[..., 2] > self.object_margin))
+
+
+def sampler_config(cfg) -> SamplerConfig:
+    d = cfg.dexnet
+    return SamplerConfig(border_px=int(d.border_px),
+                         max_approach_angle_deg=float(d.max_approach_angle_deg),
+                         max_tries=int(d.max_tries), sobel_ksize=int(d.sobel_ksize))
+
+
+def cem_config(cfg) -> CEMConfig:
+    d = cfg.dexnet
+    return CEMConfig(num_seed_samples=int(d.num_seed_samples),
+                     num_gmm_samples=int(d.num_gmm_samples), num_iters=int(d.num_iters),
+                     gmm_refit_p=float(d.gmm_refit_p),
+                     gmm_component_frac=float(d.gmm_component_frac),
+                     gmm_reg_covar=float(d.gmm_reg_covar), max_resamples=int(d.max_resamples))
+
+
+def crop_config(cfg) -> CropConfig:
+    d = cfg.dexnet
+    return CropConfig(window_px=int(d.crop_window_px), size=int(d.crop_size),
+                      depth_scale=float(d.crop_depth_scale),
+                      missing_value=float(d.crop_missing_value),
+                      pose_depth_scale=float(d.pose_depth_scale),
+                      d_ground=float(cfg.camera.height_above_bin_floor + cfg.bin.floor_thickness))
+
+
+def gqcnn_config(cfg) -> GQCNNConfig:
+    d = cfg.dexnet
+    return GQCNNConfig(crop_size=int(d.crop_size), width=int(d.width), fc=int(d.fc))
+
+
+def planarity_config(cfg) -> PlanarityConfig:
+    d = cfg.dexnet
+    return PlanarityConfig(cup_radius=float(cfg.hand.cup_diameter) / 2.0,
+                           sigma=float(d.planarity_sigma),
+                           min_coverage=float(d.planarity_min_coverage))
+
+
+def workspace(cfg, T_world_cam: np.ndarray) -> Workspace:
+    b = cfg.bin
+    return Workspace(half_x=float(b.inner_length_x) / 2.0, half_y=float(b.inner_width_y) / 2.0,
+                     object_margin=float(cfg.dexnet.object_margin),
+                     T_world_cam=np.asarray(T_world_cam, np.float64))
+
+
+def load_gqcnn(model_dir: Path | str) -> tuple[GQCNN, CropConfig]:
+    """The GQ-CNN and its crop config from a baseline artifact folder (or a ``gqcnn.pt``)."""
+    path = Path(model_dir)
+    path = path / MODEL_FILE if path.is_dir() else path
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} not found: give a baseline artifact folder "
+                                "(data/baseline/<version>) made by `python -m pipeline.baseline`")
+    blob = torch.load(path, map_location="cpu", weights_only=True)
+    net = GQCNN(GQCNNConfig(**blob["network"]))
+    net.load_state_dict(blob["state_dict"])
+    return net.eval(), CropConfig(**blob["crop"])
+
+
+class DexNetPlanner:
+    """Segmask → normals → CEM with one quality function → the best suction grasp."""
+
+    def __init__(self, variant: str, workspace: Workspace, sampler: SamplerConfig,
+                 cem: CEMConfig, planarity: PlanarityConfig, crop: CropConfig | None = None,
+                 net: GQCNN | None = None, seed: int = 0) -> None:
+        if variant not in VARIANTS:
+            raise ValueError(f"unknown Dex-Net variant {variant!r}: choose one of {VARIANTS}")
+        if variant == "gqcnn" and (net is None or crop is None):
+            raise ValueError("the gqcnn variant needs a trained GQ-CNN: pass model_dir=<baseline "
+                             "artifact> (made by `python -m pipeline.baseline`)")
+        self.variant, self.workspace = variant, workspace
+        self.sampler, self.cem, self.planarity = sampler, cem, planarity
+        self.crop, self.net = crop, net
+        self.seed = seed
+        self._calls = 0
+
+    @classmethod
+    def from_config(cls, cfg, variant: str, T_world_cam: np.ndarray,
+                    model_dir: Path | str | None = None) -> "DexNetPlanner":
+        net = crop = None
+        if variant == "gqcnn":
+            if model_dir is None:
+                raise ValueError("the gqcnn variant needs model_dir=<baseline artifact folder>")
+            net, crop = load_gqcnn(model_dir)
+        return cls(variant, workspace(cfg, T_world_cam), sampler_config(cfg), cem_config(cfg),
+                   planarity_config(cfg), crop, net, seed=int(cfg.seed))
+
+    def score(self, depth_m: np.ndarray, cloud: PointCloudImage, cands: Candidates) -> np.ndarray:
+        """Quality of each candidate: (N,) in [0, 1]."""
+        if len(cands) == 0:
+            return np.zeros(0)
+        if self.variant == "planarity":
+            return disc_planarity(cloud, cands, self.planarity)
+        crops, poses = candidate_inputs(depth_m, cands, self.crop)
+        return predict_quality(self.net, crops, poses)
+
+    def run_cem(self, depth_m: np.ndarray, intrinsics: Intrinsics,
+                rng: np.random.Generator) -> CEMResult:
+        """The whole CEM run (every iteration's candidates and scores, for logging)."""
+        depth_m = _check_depth(depth_m)
+        mask = self.workspace.object_mask(depth_m, intrinsics)
+        cloud = point_cloud_image(depth_m, intrinsics, self.sampler, object_mask=mask)
+        return cross_entropy_method(cloud, lambda c: self.score(depth_m, cloud, c), self.cem,
+                                    self.sampler, rng)
+
+    def plan(self, depth_m: np.ndarray, intrinsics: Intrinsics,
+             rng: np.random.Generator | None = None) -> list[SuctionGrasp]:
+        """One (H, W) depth image, metres → ``[best grasp]``, or ``[]`` when no candidate exists.
+
+        ``rng`` defaults to a generator seeded by (seed, number of earlier calls), so a planner
+        replays the same sequence of plans.
+        """
+        if rng is None:
+            rng = np.random.default_rng([self.seed, self._calls])
+        self._calls += 1
+        result = self.run_cem(depth_m, intrinsics, rng)
+        return grasps_of(result)
+
+
+def grasps_of(result: CEMResult) -> list[SuctionGrasp]:
+    if len(result.best) == 0:
+        return []
+    b = result.best
+    axis = b.axis[0]
+    return [SuctionGrasp(u=float(b.uv[0, 0]), v=float(b.uv[0, 1]), score=float(result.best_score),
+                         depth=float(b.depth[0]), point_cam=b.point[0].copy(),
+                         normal_cam=-axis, axis_cam=axis.copy(), angle=float(b.angle[0]))]
+
+
+def _check_depth(depth_m: np.ndarray) -> np.ndarray:
+    depth_m = np.asarray(depth_m)
+    if depth_m.ndim != 2:
+        raise ValueError(f"plan takes one (H, W) depth image in metres, got shape {depth_m.shape}")
+    if depth_m.dtype not in (np.float32, np.float64):
+        raise ValueError(f"depth must be float32/float64 metres, got dtype {depth_m.dtype} "
+                         "(convert a uint16 image with its depth unit first)")
+    return depth_m
