@@ -8,7 +8,7 @@ ARGS ?=
 STAGE ?= generate
 RUN := $(PY) -m
 
-.PHONY: help setup test test-slow reproduce generate label train baseline report verify view bench repro-check lock clean
+.PHONY: help setup test test-slow reproduce generate label train baseline evaluate report verify view bench repro-check lock clean
 
 help: ## List the targets
 	@grep -hE '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  make %-12s %s\n", $$1, $$2}'
@@ -28,6 +28,7 @@ reproduce: setup ## Run every stage with EXPERIMENT (default: default), then the
 	$(RUN) pipeline.label experiment=$(EXPERIMENT) $(ARGS)
 	$(RUN) pipeline.train experiment=$(EXPERIMENT) $(ARGS)
 	$(RUN) pipeline.baseline experiment=$(EXPERIMENT) $(ARGS)
+	$(RUN) pipeline.evaluate experiment=$(EXPERIMENT) $(ARGS)
 	$(RUN) pipeline.report experiment=$(EXPERIMENT) $(ARGS)
 
 generate: setup ## Generation stage: depth images of box heaps (paper Sec. 4.3)
@@ -41,6 +42,9 @@ train: setup ## Training stage: the DCNN grasp planner on the labels (Secs. 4.1,
 
 baseline: setup ## Dex-Net-style comparison: GQ-CNN + CEM suction planner and Table 2 (Sec. 8.1.1)
 	$(RUN) pipeline.baseline experiment=$(EXPERIMENT) $(ARGS)
+
+evaluate: setup ## Closed-loop picking trials: descriptor, 2.5D VS, suction; Table 3 (Secs. 5, 6)
+	$(RUN) pipeline.evaluate experiment=$(EXPERIMENT) $(ARGS)
 
 report: setup ## Report stage: tables and figures into reports/
 	$(RUN) pipeline.report experiment=$(EXPERIMENT) $(ARGS)

@@ -4,9 +4,12 @@ Generation throughput with 1 and 2 worker processes, the render time per frame, 
 of the stage's per-process rate to a bare pybullet loop doing the same work (same cell, same
 trickle drop and rest test, same TinyRenderer frame) measured in the same run. Labelling
 throughput with 1 and 2 workers on the generated scenes, and its split between surface
-detection and robot checks.
+detection and robot checks. Planning time per image of the DCNN (default and paper widths)
+and of the Dex-Net-style planner (GQ-CNN and planarity), GQ-CNN training throughput. The
+closed loop: the surface descriptor's time per frame, the control loop's rate, simulated
+seconds per wall second and the wall time of a 3-box trial.
 
-    python -m pipeline.bench [--scenes 60] [--render-frames 30]
+    python -m pipeline.bench [--scenes 60] [--render-frames 30] [--only stages|planners|closed-loop]
 """
 
 from __future__ import annotations
@@ -224,6 +227,114 @@ def training_images_per_s(width: float, batch: int = 16, steps: int = 4) -> floa
     return batch / float(np.median(times[1:]))
 
 
+def dexnet_figures(cfg, num_images: int = 6) -> dict[str, float]:
+    """Dex-Net-style planner: median planning time per image of each variant (the GQ-CNN of
+    ``data/baseline/latest`` when it exists, else untrained weights of the same size), and the
+    GQ-CNN's training throughput (crops/s, batch 64)."""
+    import torch
+
+    from pipeline.artifacts.fingerprint import REPO_ROOT
+    from pipeline.cli import compose
+    from pipeline.dexnet.gqcnn import GQCNN
+    from pipeline.dexnet.planner import (
+        DexNetPlanner, cem_config, crop_config, gqcnn_config, planarity_config, sampler_config,
+        workspace,
+    )
+    from pipeline.simulation.scene import connect, scene_rng, simulate_scene
+
+    torch.set_num_threads(2)
+    full = compose("baseline", ["experiment=default"])
+    client = connect()
+    scenes = [simulate_scene(client, cfg, scene_rng(BENCH_SEED, 2, i)) for i in range(num_images)]
+    p.disconnect(client)
+    intr = intrinsics_of(cfg)
+    out: dict[str, float] = {}
+    trained = REPO_ROOT / "data" / "baseline" / "latest" / "gqcnn.pt"
+    for variant in ("gqcnn", "planarity"):
+        if variant == "gqcnn" and trained.is_file():
+            planner, label = DexNetPlanner.from_config(full, "gqcnn", scenes[0].T_world_cam,
+                                                       trained.parent), "trained"
+        else:
+            torch.manual_seed(0)
+            net = GQCNN(gqcnn_config(full)) if variant == "gqcnn" else None
+            planner = DexNetPlanner(variant, workspace(full, scenes[0].T_world_cam),
+                                    sampler_config(full), cem_config(full),
+                                    planarity_config(full), crop_config(full), net)
+            label = "untrained" if variant == "gqcnn" else "analytic"
+        planner.plan(scenes[0].depth_m, intr)  # warm-up
+        times = []
+        for sc in scenes:
+            t0 = time.perf_counter()
+            planner.plan(sc.depth_m, intr)
+            times.append(time.perf_counter() - t0)
+        out[f"plan_dexnet_{variant}_ms"] = 1000 * float(np.median(times))
+        print(f"planning, Dex-Net-style {variant} + CEM ({label}): "
+              f"{out[f'plan_dexnet_{variant}_ms']:.1f} ms/image")
+    net = GQCNN(gqcnn_config(full)).train()
+    opt = torch.optim.Adam(net.parameters(), lr=1e-3)
+    size = int(full.dexnet.crop_size)
+    x, pose = torch.randn(64, 1, size, size), torch.randn(64, 2)
+    y = (torch.rand(64) > 0.5).float()
+    times = []
+    for _ in range(6):
+        t0 = time.perf_counter()
+        opt.zero_grad()
+        torch.nn.functional.binary_cross_entropy_with_logits(net(x, pose), y).backward()
+        opt.step()
+        times.append(time.perf_counter() - t0)
+    out["gqcnn_train_crops_per_s"] = 64 / float(np.median(times[1:]))
+    print(f"GQ-CNN training, batch 64: {out['gqcnn_train_crops_per_s']:.0f} crops/s")
+    return out
+
+
+def closed_loop_figures(cfg_name: str = "evaluate") -> dict[str, float]:
+    """Closed loop: the descriptor's time per 416 x 416 frame, and one trial of 3 boxes driven by
+    the training-free Dex-Net-style planarity planner (no artifact needed): control-loop rate
+    (wall), simulated seconds per wall second, wall time of the trial."""
+    import torch
+
+    from pipeline.cli import compose
+    from pipeline.dexnet.planner import DexNetPlanner
+    from pipeline.labelling.robot_check import robot_config
+    from pipeline.picking.cell import PickCell
+    from pipeline.picking.trial import PickRunner
+    from pipeline.robot.model import Robot
+    from pipeline.servo.descriptor import DescriptorConfig, describe_surface
+
+    torch.set_num_threads(1)
+    cfg = compose(cfg_name, ["experiment=default", "evaluate.boxes_per_trial=3",
+                             "evaluate.dexnet_variant=planarity"])
+    cell = PickCell(cfg, lambda: Robot(robot_config(cfg)))
+    dex = DexNetPlanner.from_config(cfg, "planarity", cell.robot.home_camera_pose())
+    runner = PickRunner(cfg, cell, lambda d, i, rng: dex.plan(d, i, rng=rng), "dexnet")
+    cell.reset(np.random.default_rng([BENCH_SEED, 31, 0]), 3)
+    frame = cell.render()
+    ys, xs = np.nonzero(np.isin(frame.body_ids, list(cell.boxes)))
+    seed = np.array([xs[len(xs) // 2], ys[len(ys) // 2]], np.float64)
+    dcfg = DescriptorConfig()
+    times = []
+    for _ in range(20):
+        t0 = time.perf_counter()
+        describe_surface(frame.depth_m, cell.intrinsics, seed, dcfg)
+        times.append(time.perf_counter() - t0)
+    out = {"descriptor_ms_per_frame": 1000 * float(np.median(times))}
+    print(f"surface descriptor, 416x416 frame: {out['descriptor_ms_per_frame']:.1f} ms")
+    t0 = time.perf_counter()
+    result = runner.run_trial(0, np.random.default_rng([BENCH_SEED, 31, 0]),
+                              np.random.default_rng([BENCH_SEED, 37, 0]))
+    wall = time.perf_counter() - t0
+    steps = runner.timings["control_step_s"]
+    out["control_loop_hz"] = 1.0 / float(np.median(steps)) if steps else float("nan")
+    out["sim_s_per_wall_s"] = result.sim_s / wall
+    out["trial_3_boxes_wall_s"] = wall
+    print(f"closed loop: control loop {out['control_loop_hz']:.1f} Hz (wall; render + "
+          f"descriptor + servo + Jacobian + physics), {out['sim_s_per_wall_s']:.2f} simulated s "
+          f"per wall s; one 3-box trial {wall:.1f} s wall ({result.picked}/{result.boxes} picked "
+          f"in {len(result.attempts)} attempts, {result.sim_s:.1f} s simulated)")
+    cell.close()
+    return out
+
+
 def intrinsics_of(cfg):
     from pipeline.camera.geometry import Intrinsics
     return Intrinsics.from_config(cfg.camera)
@@ -237,11 +348,21 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", type=int, default=60, help="scenes per throughput run")
     parser.add_argument("--render-frames", type=int, default=30)
+    parser.add_argument("--only", choices=("all", "stages", "planners", "closed-loop"),
+                        default="all", help="run one group of figures")
     args = parser.parse_args(argv)
     cfg = OmegaConf.to_object(compose("generate", ["experiment=smoke"]))
     os.environ.setdefault("LP_NUM_THREADS", "1")
 
     results = {}
+    if args.only in ("planners", "closed-loop"):
+        if args.only == "planners":
+            results.update(planning_times(cfg))
+            results.update(dexnet_figures(cfg))
+        else:
+            results.update(closed_loop_figures())
+        print(json.dumps({k: round(v, 3) for k, v in results.items()}))
+        return 0
     results["render_ms_per_frame"] = render_time_ms(args.render_frames, cfg)
     print(f"render, 416x416 depth + mask, 20 boxes: {results['render_ms_per_frame']:.1f} ms/frame")
     results["bare_loop_scenes_per_s"] = bare_loop(args.scenes, cfg, BENCH_SEED)
@@ -271,6 +392,9 @@ def main(argv: list[str] | None = None) -> int:
     results["label_vs_generate_1w"] = results["label_1w_scenes_per_s"] / one
     print(f"labelling / generation, per process:    {results['label_vs_generate_1w']:.2f} "
           "(target >= 1: labelling is not the bottleneck)")
+    if args.only == "all":
+        results.update(dexnet_figures(cfg))
+        results.update(closed_loop_figures())
     print(json.dumps({k: round(v, 3) for k, v in results.items()}))
     return 0
 

@@ -84,6 +84,7 @@ from pipeline.report_figures import (  # noqa: F401 (FIG_DPI, PNG_METADATA, _out
     figure_labels_sample,
     figure_planner_points,
     figure_pr_curve,
+    figure_servo_convergence,
     figure_table2_curve,
     figure_sample_depth,
 )
@@ -94,10 +95,11 @@ STAGE = "report"
 SECTIONS = ("report",)
 # The upstream versions cover which artifacts are read.
 NOT_AFFECTING_RESULT = ("report.force", "report.generate_version", "report.label_version",
-                        "report.train_version", "report.baseline_version")
+                        "report.train_version", "report.baseline_version",
+                        "report.evaluate_version")
 # Files whose content is measured wall-clock time: the same artifacts give other numbers on
 # another run, so `make repro-check` skips them (they are listed in metrics.volatile_files).
-VOLATILE_FILES = ("tables/planning_time.csv",)
+VOLATILE_FILES = ("tables/planning_time.csv", "tables/table3_timing.csv")
 
 PUBLISHED = ("README.md", "figures", "tables")
 NONE = "—"  # shown in Markdown where a value does not exist (e.g. an empty split)
@@ -742,6 +744,118 @@ def render_baseline(info: BaselineInfo | None, tables: dict[str, Table],
     return out
 
 
+# ---------------------------------------------------------------------- Table 3 (closed loop)
+TABLE3_SECTION = "Table 3: closed-loop bin-picking (Secs. 5, 6)"
+EVALUATE_NOT_RUN = "Closed-loop evaluation: not run yet (`make evaluate`)."
+PLANNER_LABELS = {"dcnn": "ours: DCNN + descriptor + 2.5D VS (2 cups)",
+                  "dexnet": "Dex-Net-style GQ-CNN + CEM, same robot (1 cup)"}
+FAILURE_MEANING = {
+    "no_seal": "a cup's rim did not lie on one face of one box (edge, corner, small face, "
+               "tilt beyond the cup's compliance)",
+    "dropped": "sealed, but the active cups cannot hold the box's weight and torque",
+    "collision": "the arm or hand touched the bin or another box",
+    "joint_limits": "the servo ran into joint limits",
+    "timeout": "the servo did not converge in time",
+    "lost_target": "the descriptor found no surface at the tracked point",
+}
+
+
+@dataclass
+class EvaluateInfo:
+    folder: Path
+    manifest: dict
+
+    @property
+    def version(self) -> str:
+        return self.folder.name
+
+    @property
+    def metrics(self) -> dict:
+        return self.manifest["metrics"]
+
+
+def resolve_evaluate(root: Path, version: str) -> EvaluateInfo | None:
+    """The evaluation artifact to report, or None when ``version`` is "latest" and none exists."""
+    folder = _optional_artifact(root, "evaluate", version)
+    if folder is None:
+        return None
+    manifest = load_manifest(folder)
+    if not (manifest.get("metrics") or {}).get("table3"):
+        raise ArtifactError(f"{folder.name}/manifest.json (evaluate) lacks metrics.table3; "
+                            "recompute it with `make evaluate` (evaluate.force=true).")
+    return EvaluateInfo(folder, manifest)
+
+
+def table3_table(info: EvaluateInfo) -> Table:
+    """Table 3: the paper's rows and ours (success rate; PPH of the robot's simulated motion)."""
+    headers = ["", "system", "hand", "success rate", "attempts", "mean PPH (motion only)"]
+    rows = []
+    for r in info.metrics["paper_table3"]:
+        rows.append(["paper", r["system"], r["hand"], r["success"], None,
+                     r["pph"] if r["pph"] is not None else None])
+    for r in info.metrics["table3"]:
+        rows.append(["this reproduction", PLANNER_LABELS.get(r["planner"], r["planner"]),
+                     "suction (2 cups)" if r["planner"] == "dcnn" else "suction (1 cup)",
+                     100.0 * float(r["success_rate"]), int(r["attempts"]), r["pph_motion"]])
+    return Table("table3_success", headers, rows,
+                 ["", "", "", "{:.1f} %", "{}", "{}"], csv_formats=["", "", "", "{:.3f}", "{}", "{}"],
+                 text_columns=3)
+
+
+def failures_table(info: EvaluateInfo) -> Table:
+    from pipeline.picking.trial import OUTCOMES, TRIAL_ENDS
+
+    kinds = OUTCOMES[1:]
+    headers = ["planner", *kinds, "success on another box", *(f"trials ended: {e}" for e in TRIAL_ENDS)]
+    rows = [[r["planner"], *(int(r[f"fail_{k}"]) for k in kinds), int(r["wrong_target"]),
+             *(int(r[f"end_{e}"]) for e in TRIAL_ENDS)] for r in info.metrics["table3"]]
+    return Table("table3_failures", headers, rows)
+
+
+def table3_timing_table(info: EvaluateInfo) -> Table:
+    """Measured wall-clock figures of the evaluation run (volatile)."""
+    t = (info.manifest.get("timings") or {}).get("planners", {})
+    headers = ["planner", "planning time median (ms)", "PPH incl. planning",
+               "descriptor (ms/frame)", "control loop (Hz, wall)", "sim s per wall s",
+               "trial wall time (s)"]
+    rows = [[PLANNER_LABELS.get(k, k), v.get("planning_ms_median"), v.get("pph_with_planning"),
+             v.get("descriptor_ms_median"), v.get("control_loop_hz"), v.get("sim_s_per_wall_s"),
+             v.get("trial_wall_s_mean")] for k, v in t.items()]
+    return Table("table3_timing", headers, rows)
+
+
+def render_evaluate(info: EvaluateInfo | None, tables: dict[str, Table]) -> list[str]:
+    out = [f"## {TABLE3_SECTION}", ""]
+    if info is None:
+        return out + [EVALUATE_NOT_RUN, ""]
+    cfg = info.manifest.get("config", {})
+    ev = cfg.get("evaluate") or {}
+    motion = cfg.get("motion") or {}
+    out += [
+        f"Pick-and-place trials in pybullet (evaluation artifact `{info.version}`): "
+        f"{ev.get('num_trials')} trials of {ev.get('boxes_per_trial')} boxes per planner, the "
+        "same heaps (same seeds) for every planner, boxes of `eval_boxes` (the three training "
+        "sizes and four unseen ones). Success rate = successful grasps / attempts. PPH = "
+        "successful picks per hour of *simulated* robot time: servoing at "
+        f"{(cfg.get('servo') or {}).get('control_rate_hz')} Hz, the approach, suction, lift, "
+        f"and joint moves to the conveyor and back at {motion.get('max_joint_speed')} rad/s "
+        f"and {motion.get('max_joint_accel')} rad/s²; the measured planning time is added in "
+        "[tables/table3_timing.csv](tables/table3_timing.csv) (wall-clock, not part of the "
+        "reproducibility check). The paper's rows are copied from its Table 3.",
+        "",
+        tables["table3_success"].markdown(),
+        "Failures by kind (attempts) and how the trials ended:",
+        "",
+        tables["table3_failures"].markdown(),
+        *[f"- *{k}*: {v}" for k, v in FAILURE_MEANING.items()],
+        "",
+        "CSV versions: [tables/table3_success.csv](tables/table3_success.csv), "
+        "[tables/table3_failures.csv](tables/table3_failures.csv).",
+        "",
+    ]
+    return out
+
+
 # ---------------------------------------------------------------------- README
 def _commit(manifest: dict) -> str:
     code = manifest.get("code", {})
@@ -754,7 +868,8 @@ def _commit(manifest: dict) -> str:
 def render_readme(version: str, upstream: dict[str, tuple[str, dict]], tables: dict[str, Table],
                   figures: dict[str, str], gen_cfg: dict, stats: DatasetStats,
                   labels: LabelInfo | None = None, trained: TrainInfo | None = None,
-                  baseline: BaselineInfo | None = None) -> str:
+                  baseline: BaselineInfo | None = None,
+                  evaluated: EvaluateInfo | None = None) -> str:
     phys = gen_cfg.get("physics", {})
     dt = float(phys.get("time_step", 1 / 240))
     cap = phys.get("max_settle_steps")
@@ -779,6 +894,8 @@ def render_readme(version: str, upstream: dict[str, tuple[str, dict]], tables: d
         out.append(f"| train | not run yet (`make train`) | {NONE} |")
     if baseline is None:
         out.append(f"| baseline | not run yet (`make baseline`) | {NONE} |")
+    if evaluated is None:
+        out.append(f"| evaluate | not run yet (`make evaluate`) | {NONE} |")
     out += [
         "",
         "Each artifact lives in `data/<stage>/<version>/`; its `manifest.json` holds the full "
@@ -811,6 +928,7 @@ def render_readme(version: str, upstream: dict[str, tuple[str, dict]], tables: d
     pr_figure = "figures/pr_curve.png"
     out += render_train(trained, tables, pr_figure if pr_figure in figures else None)
     out += render_baseline(baseline, tables, figures)
+    out += render_evaluate(evaluated, tables)
     out += ["## Figures", ""]
     for rel, caption in figures.items():
         out += [f"![{caption}]({rel})", "", f"*{caption}*", ""]
@@ -825,8 +943,10 @@ def render_readme(version: str, upstream: dict[str, tuple[str, dict]], tables: d
            f"Dex-Net) is reported above, in \"{TABLE2_SECTION}\". " if baseline is not None else
            "Table 2 (ours vs. Dex-Net) will appear above once the baseline stage has run "
            "(`make baseline`). ")
-        + "Table 3 (bin-picking success rate and speed) will appear when the closed-loop "
-        "evaluation stage exists. No numbers are reported for it yet.",
+        + ("Table 3 (bin-picking success rate and speed) is reported above, in "
+           f"\"{TABLE3_SECTION}\"." if evaluated is not None else
+           "Table 3 (bin-picking success rate and speed) will appear above once the "
+           "closed-loop evaluation has run (`make evaluate`)."),
         "",
     ]
     return "\n".join(out)
@@ -885,6 +1005,7 @@ def report(cfg: DictConfig) -> Path:
                             labels.version if labels is not None else None)
     baseline = resolve_baseline(root, str(cfg.report.baseline_version), gen_version,
                                 trained.version if trained is not None else None)
+    evaluated = resolve_evaluate(root, str(cfg.report.evaluate_version))
     config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
     upstream = {"generate": gen_version}
     if labels is not None:
@@ -893,6 +1014,8 @@ def report(cfg: DictConfig) -> Path:
         upstream["train"] = trained.version
     if baseline is not None:
         upstream["baseline"] = baseline.version
+    if evaluated is not None:
+        upstream["evaluate"] = evaluated.version
     version = compute_version(STAGE, config, upstream)
     gen_cfg = gen_manifest.get("config", {})
 
@@ -913,6 +1036,10 @@ def report(cfg: DictConfig) -> Path:
             tables[t.name] = t
         if baseline is not None:
             for t in (table2_table(baseline), planning_time_table(baseline)):
+                tables[t.name] = t
+        if evaluated is not None:
+            for t in (table3_table(evaluated), failures_table(evaluated),
+                      table3_timing_table(evaluated)):
                 tables[t.name] = t
         for t in tables.values():
             path = run.work_dir / "tables" / f"{t.name}.csv"
@@ -962,6 +1089,13 @@ def report(cfg: DictConfig) -> Path:
                     f"{drawn} test depth images with each planner's optimal grasp point and the "
                     "true surface centres (white +), like the paper's Fig. 10.")
 
+        if evaluated is not None:
+            conv = evaluated.folder / "servo_convergence.csv"
+            figure_servo_convergence(conv, run.work_dir / "figures" / "servo_convergence.png")
+            figures["figures/servo_convergence.png"] = (
+                "Visual-servoing error over simulated time for the attempts of the logged "
+                "trials: translation error |p_e − p_e*| (normalised) and rotation error |uθ|.")
+
         used = {"generate": (gen_version, gen_manifest)}
         if labels is not None:
             used["label"] = (labels.version, labels.manifest)
@@ -969,8 +1103,10 @@ def report(cfg: DictConfig) -> Path:
             used["train"] = (trained.version, trained.manifest)
         if baseline is not None:
             used["baseline"] = (baseline.version, baseline.manifest)
+        if evaluated is not None:
+            used["evaluate"] = (evaluated.version, evaluated.manifest)
         readme = render_readme(run.version, used, tables, figures, gen_cfg, stats, labels,
-                               trained, baseline)
+                               trained, baseline, evaluated)
         (run.work_dir / "README.md").write_text(readme)
 
         with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version) as log:
@@ -992,6 +1128,7 @@ def report(cfg: DictConfig) -> Path:
             "label_version": labels.version if labels is not None else None,
             "train_version": trained.version if trained is not None else None,
             "baseline_version": baseline.version if baseline is not None else None,
+            "evaluate_version": evaluated.version if evaluated is not None else None,
             "volatile_files": sorted(f for f in VOLATILE_FILES if (run.work_dir / f).is_file()),
             "scenes": dict(stats.scenes),
             "boxes": dict(stats.boxes),

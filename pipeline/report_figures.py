@@ -302,3 +302,38 @@ def figure_planner_points(gen_dir: Path, chosen: dict[str, np.ndarray], planners
     fig.suptitle("Optimal grasp points of each planner (paper Fig. 10; light = near)", fontsize=9)
     _save(fig, path)
     return n
+
+
+def figure_servo_convergence(csv_path: Path, path: Path) -> None:
+    """The servo error over simulated time, one line per attempt of the logged trials (the
+    evaluation's ``servo_convergence.csv``)."""
+    import csv
+
+    with open(csv_path) as f:
+        rows = list(csv.DictReader(f))
+    fig = Figure(figsize=(9.0, 3.6), dpi=FIG_DPI, layout="constrained")
+    ax_t, ax_r = fig.subplots(1, 2)
+    groups: dict[tuple, list[dict]] = {}
+    for r in rows:
+        groups.setdefault((r["planner"], r["trial"], r["attempt"]), []).append(r)
+    colours = {"dcnn": "tab:blue", "dexnet": "tab:red"}
+    seen = set()
+    for (planner, _, _), rs in groups.items():
+        t = [float(r["t_s"]) for r in rs]
+        label = None if planner in seen else planner
+        seen.add(planner)
+        ax_t.plot(t, [float(r["translation_error"]) for r in rs], color=colours.get(planner, "k"),
+                  lw=0.8, alpha=0.7, label=label)
+        ax_r.plot(t, [float(r["rotation_error_deg"]) for r in rs],
+                  color=colours.get(planner, "k"), lw=0.8, alpha=0.7)
+    for ax, name in ((ax_t, "|p_e − p_e*| (normalised)"), (ax_r, "|uθ| (degrees)")):
+        ax.set_yscale("log")
+        ax.set_xlabel("simulated time (s)")
+        ax.set_ylabel(name)
+        ax.grid(True, alpha=0.3)
+    if not rows:
+        ax_t.text(0.5, 0.5, "no logged attempts", transform=ax_t.transAxes, ha="center")
+    elif seen:
+        ax_t.legend(fontsize=8)
+    fig.suptitle("2.5D visual-servoing convergence (logged trials)", fontsize=10)
+    _save(fig, path)

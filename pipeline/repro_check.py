@@ -25,7 +25,7 @@ from pipeline.tracking import rrd_equal
 from pipeline.view import MODEL_STAGES
 
 # The smoke pipeline, in order; later issues append their stages here.
-STAGES = ("generate", "label", "train", "baseline", "report")
+STAGES = ("generate", "label", "train", "baseline", "evaluate", "report")
 
 
 

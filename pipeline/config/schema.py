@@ -294,6 +294,61 @@ class BaselineConfig:
 
 
 @dataclass
+class MotionSchema:
+    """Robot speed limits and the timing of the pick sequence (``conf/motion/``)."""
+
+    max_joint_speed: float = 3.14  # rad/s per joint (xArm6: 180 deg/s)
+    max_joint_accel: float = 10.0  # rad/s^2, for the point-to-point move times
+    servo_max_linear_speed: float = 0.5  # m/s, camera, during visual servoing
+    servo_max_angular_speed: float = 1.5  # rad/s
+    approach_speed: float = 0.05  # m/s along the camera axis, from d* to contact
+    press_depth: float = 0.003  # m, cups pressed this far past the surface
+    lift_height: float = 0.10  # m, straight up with the box
+    lift_speed: float = 0.25  # m/s
+    suction_on_s: float = 0.10  # vacuum build-up before lifting
+    suction_off_s: float = 0.10  # release at the conveyor
+    place_position: List[float] = field(default_factory=lambda: [-0.05, 0.40, 0.30])  # m, world: camera above the conveyor
+
+
+@dataclass
+class ServoSchema:
+    """Surface feature descriptor (Eqs. 11-14) and 2.5D visual servoing (Eqs. 15-28)."""
+
+    window: int = 21
+    eps_distance: float = 0.004
+    eps_normal: float = 0.05
+    min_pixels: int = 50
+    gain: float = 0.4  # lambda
+    gain_per_step: bool = True
+    control_rate_hz: float = 30.0
+    tolerance_xy: float = 0.01
+    tolerance_log_z: float = 0.01
+    tolerance_rot_deg: float = 1.0
+    timeout_s: float = 8.0
+    joint_damping: float = 0.001
+
+
+@dataclass
+class EvaluateConfig:
+    """The closed-loop evaluation stage (``pipeline.evaluate``)."""
+
+    planners: List[str] = field(default_factory=lambda: ["dcnn", "dexnet"])
+    dexnet_variant: str = "gqcnn"  # gqcnn | planarity
+    dexnet_pattern: str = "L"  # the cup that serves Dex-Net's single suction point
+    dcnn_threshold: Optional[float] = None  # th of Eq. 3 for the closed loop; None: the model's
+    train_version: str = "latest"
+    baseline_version: str = "latest"
+    num_trials: int = MISSING
+    boxes_per_trial: int = 12
+    max_failures_per_target: int = 5
+    max_attempts_per_trial: int = 40
+    num_threads: int = 1
+    log_trials: int = 2
+    workers: int = 0
+    force: bool = False
+
+
+@dataclass
 class ReportConfig:
     """The report stage: which artifacts to gather and how many sample images to draw."""
 
@@ -301,6 +356,7 @@ class ReportConfig:
     label_version: str = "latest"  # no label artifact at all: the report leaves labels out
     train_version: str = "latest"  # no train artifact at all: the report leaves Table 1 out
     baseline_version: str = "latest"  # no baseline artifact at all: the report leaves Table 2 out
+    evaluate_version: str = "latest"  # no evaluate artifact at all: the report leaves Table 3 out
     num_sample_images: int = 6
     force: bool = False
 
@@ -336,6 +392,10 @@ class PipelineConfig:
     suction: SuctionSchema = field(default_factory=SuctionSchema)
     dexnet: DexNetSchema = field(default_factory=DexNetSchema)
     baseline: BaselineConfig = field(default_factory=BaselineConfig)
+    motion: MotionSchema = field(default_factory=MotionSchema)
+    servo: ServoSchema = field(default_factory=ServoSchema)
+    evaluate: EvaluateConfig = field(default_factory=EvaluateConfig)
+    eval_boxes: BoxesConfig = field(default_factory=BoxesConfig)
     logging: LoggingConfig = field(default_factory=LoggingConfig)
 
 

@@ -1,0 +1,11 @@
+"""Closed-loop picking in simulation: executing a chosen grasp with the robot in pybullet.
+
+* :mod:`pipeline.picking.suction`: a suction gripper that can fail like a real one (seal test by
+  ray casts from the cups' lips, wrench test of the held box, a force-limited fixed constraint).
+"""
+
+from pipeline.picking.suction import (PATTERN_CUPS, GraspOutcome, HoldResult, SealResult,
+                                      SuctionGripper, hold_test, seal_test)
+
+__all__ = ["PATTERN_CUPS", "GraspOutcome", "HoldResult", "SealResult", "SuctionGripper",
+           "hold_test", "seal_test"]

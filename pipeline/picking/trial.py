@@ -1,0 +1,399 @@
+"""Pick-and-place trials in the simulated cell (paper Secs. 5, 6; Fig. 2's two loops).
+
+One **attempt** (``PickRunner.attempt``):
+
+1. **Plan at home** (red loop of Fig. 2): one depth image at the home pose → the planner →
+   G_opt (pixel) and its pattern S_opt (L, R or B; the Dex-Net-style planner has one suction
+   point and is served by the ``evaluate.dexnet_pattern`` cup). The planning time is measured.
+2. **Servo** (blue loop): every control period (``servo.control_rate_hz``) a new depth image →
+   the surface feature descriptor seeded at the previous g′ (G_opt at first; the previous g′
+   is carried into the new image by the camera's known motion, since the image moves tens of
+   pixels between frames) → features →
+   the 2.5D visual-servoing law (Eq. 23) → joint velocities through the damped pseudo-inverse
+   of the camera Jacobian (Eq. 28), limited to ``motion.max_joint_speed`` → integrated for one
+   period while the physics runs. Converged when the error is within the tolerances; a
+   timeout after ``servo.timeout_s`` simulated seconds. For the Dex-Net-style planner the
+   servo target is its own suction point (tracked in the world; the descriptor supplies the
+   surface normal and axes), not the surface centre: Dex-Net does not refine its point.
+3. **Approach** along the camera axis from d* until the lips touch and press
+   (``motion.press_depth``); **suction**: the seal test and the hold test of the active cups
+   (``pipeline.picking.suction``); **lift** ``motion.lift_height`` with the box hanging on its
+   constraint; **place**: a point-to-point move to the conveyor pose, release, and back home.
+
+Outcomes of an attempt: ``success``, or the failure ``no_seal``, ``dropped`` (sealed but the
+cups cannot hold the box, or it came off during the lift), ``collision`` (the arm or hand
+touched the bin or another box while servoing or approaching), ``joint_limits`` (the servo ran
+into joint limits and could not continue), ``timeout``, ``lost_target`` (the descriptor found
+no surface at the seed). ``wrong_target`` flags a success on another box than the one under
+G_opt at home.
+
+**Time.** Simulated seconds: the servo's control periods, the approach and lift at their
+speeds, the suction on/off times, and point-to-point moves (trapezoidal joint profiles at
+``motion.max_joint_speed`` / ``max_joint_accel``) to the conveyor and back home. The measured
+planning time is kept apart, so that pieces per hour can be given with and without it.
+
+A **trial** (``run_trial``, paper Sec. 6): ``evaluate.boxes_per_trial`` boxes dropped into the
+bin; attempts until the bin is empty, the planner finds no grasp at home, one box has failed
+``evaluate.max_failures_per_target`` times, or ``evaluate.max_attempts_per_trial`` attempts.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import pybullet as p
+
+from pipeline.camera.geometry import Intrinsics
+from pipeline.picking.cell import Frame, PickCell
+
+OUTCOMES = ("success", "no_seal", "dropped", "collision", "joint_limits", "timeout",
+            "lost_target")
+TRIAL_ENDS = ("bin_empty", "no_grasp", "max_failures", "max_attempts")
+
+
+@dataclass
+class Attempt:
+    """One grasp attempt's record (JSON-ready fields)."""
+
+    trial: int
+    index: int
+    planner: str
+    pattern: str
+    g_opt: list  # [u, v] at home
+    target_body: int  # body under G_opt at home (−1: none)
+    target_type: str
+    outcome: str = ""
+    grasped_body: int = -1
+    wrong_target: bool = False
+    servo_steps: int = 0
+    servo_s: float = 0.0
+    motion_s: float = 0.0  # approach, suction, lift, place and return, simulated
+    planning_s: float = 0.0  # measured wall-clock
+    final_error: list = field(default_factory=list)  # |p_e − p_e*| (3) and |uθ| (deg)
+    seal_reason: str = ""
+
+    @property
+    def sim_s(self) -> float:
+        return self.servo_s + self.motion_s
+
+
+@dataclass
+class TrialResult:
+    trial: int
+    planner: str
+    boxes: int
+    picked: int
+    end: str
+    attempts: list[Attempt]
+    trace: list[dict] = field(default_factory=list)  # per control step, for the logs
+
+    @property
+    def sim_s(self) -> float:
+        return float(sum(a.sim_s for a in self.attempts))
+
+    @property
+    def planning_s(self) -> float:
+        return float(sum(a.planning_s for a in self.attempts))
+
+
+def _project(T_world_cam: np.ndarray, point_world: np.ndarray, intr: Intrinsics,
+             fallback) -> np.ndarray:
+    """Pixel (u, v) of a world point in a camera; ``fallback`` when it is behind the camera."""
+    T_cam_world = np.linalg.inv(T_world_cam)
+    c = T_cam_world[:3, :3] @ point_world + T_cam_world[:3, 3]
+    if c[2] <= 1e-6:
+        return np.asarray(fallback, np.float64)
+    return np.array([intr.fx * c[0] / c[2] + intr.cx, intr.fy * c[1] / c[2] + intr.cy])
+
+
+def move_time(dq: np.ndarray, max_speed: float, max_accel: float) -> float:
+    """Duration (s) of a synchronised point-to-point move: the slowest joint's trapezoidal
+    (or triangular, for short moves) profile at ``max_speed`` (rad/s) and ``max_accel``."""
+    d = float(np.max(np.abs(dq))) if len(dq) else 0.0
+    if d <= 0.0:
+        return 0.0
+    if d >= max_speed ** 2 / max_accel:
+        return d / max_speed + max_speed / max_accel
+    return 2.0 * math.sqrt(d / max_accel)
+
+
+class PickRunner:
+    """Runs attempts and trials in a ``PickCell`` with one planner.
+
+    ``planner(depth_m, intrinsics, rng)`` returns ranked candidates (objects with ``u``, ``v``,
+    ``grasp_class`` (a ``GraspClass`` or None), ``point_cam`` optional).
+    """
+
+    def __init__(self, cfg, cell: PickCell, planner, planner_name: str) -> None:
+        from pipeline.picking.suction import SuctionGripper
+        from pipeline.dexnet.contact import SuctionModelConfig
+        from pipeline.servo.control import ServoConfig
+        from pipeline.servo.descriptor import DescriptorConfig
+
+        self.cfg, self.cell, self.planner, self.name = cfg, cell, planner, planner_name
+        s, m = cfg.servo, cfg.motion
+        self.dt = 1.0 / float(s.control_rate_hz)
+        self.descriptor_cfg = DescriptorConfig(window=int(s.window),
+                                               eps_distance=float(s.eps_distance),
+                                               eps_normal=float(s.eps_normal),
+                                               min_pixels=int(s.min_pixels))
+        self.servo_cfg = ServoConfig(gain=float(s.gain), standoff=float(cfg.hand.standoff),
+                                     cup_offset=float(cfg.hand.cup_offset),
+                                     tolerance_xy=float(s.tolerance_xy),
+                                     tolerance_log_z=float(s.tolerance_log_z),
+                                     tolerance_rot_deg=float(s.tolerance_rot_deg),
+                                     max_linear_speed=float(m.servo_max_linear_speed),
+                                     max_angular_speed=float(m.servo_max_angular_speed),
+                                     gain_per_step=bool(s.gain_per_step))
+        su = cfg.suction
+        self.suction_cfg = SuctionModelConfig(
+            cup_radius=float(cfg.hand.cup_diameter) / 2.0, vacuum_force=float(su.vacuum_force),
+            friction=float(su.friction), compliance=float(su.compliance),
+            ring_points=int(su.ring_points), visibility_tolerance=float(su.visibility_tolerance),
+            gravity=abs(float(cfg.physics.gravity)), density=float(cfg.eval_boxes.density))
+        self.gripper_factory = lambda: SuctionGripper(cell.client, cell.robot, self.suction_cfg,
+                                                      float(cfg.hand.cup_offset))
+        self._place_q: np.ndarray | None = None
+        self.timings: dict[str, list[float]] = {"descriptor_s": [], "control_step_s": [],
+                                                "render_s": []}
+
+    # ------------------------------------------------------------------ helpers
+    def _pattern(self, cand) -> str:
+        cls = getattr(cand, "grasp_class", None)
+        if cls is None:
+            return str(self.cfg.evaluate.dexnet_pattern)
+        return cls.name
+
+    def _render(self) -> Frame:
+        t0 = time.perf_counter()
+        frame = self.cell.render()
+        self.timings["render_s"].append(time.perf_counter() - t0)
+        return frame
+
+    def _move_twist(self, q: np.ndarray, twist_cam: np.ndarray) -> tuple[np.ndarray, bool]:
+        """One control period of a camera twist (camera frame) → new joints; physics steps."""
+        from pipeline.servo.jacobian import camera_jacobian, integrate, joint_velocities
+
+        robot = self.cell.robot
+        J = camera_jacobian(robot, q)
+        qdot = joint_velocities(J, twist_cam, float(self.cfg.servo.joint_damping))
+        q_next, clamped = integrate(robot, q, qdot, self.dt, float(self.cfg.motion.max_joint_speed))
+        robot.set_joints(q_next)
+        self.cell.step(self.dt)
+        return q_next, clamped
+
+    def _collides(self, q: np.ndarray, target: int) -> bool:
+        ignore = [target] if target >= 0 else []
+        return bool(self.cell.robot.in_collision(None, self.cell.obstacles, ignore_body_ids=ignore))
+
+    def _place_joints(self) -> np.ndarray:
+        """Joints of the conveyor pose (camera at ``motion.place_position`` looking down)."""
+        if self._place_q is None:
+            robot = self.cell.robot
+            T = robot.home_camera_pose().copy()
+            T[:3, 3] = np.asarray(self.cfg.motion.place_position, np.float64)
+            q_home = robot.home_q()
+            res = robot.solve_ik(T, seed_q=q_home, obstacle_ids=[])
+            if not res.ok:
+                raise RuntimeError(f"the conveyor pose {list(T[:3, 3])} is out of the robot's "
+                                   f"reach ({res.reason}): change motion.place_position")
+            self._place_q = res.q
+            robot.set_joints(q_home)
+        return self._place_q
+
+    # ------------------------------------------------------------------ one attempt
+    def plan_at_home(self, rng: np.random.Generator):
+        robot = self.cell.robot
+        robot.set_joints(robot.home_q())
+        frame = self._render()
+        t0 = time.perf_counter()
+        cands = self.planner(frame.depth_m, self.cell.intrinsics, rng)
+        return frame, cands, time.perf_counter() - t0
+
+    def attempt(self, frame: Frame, cand, planning_s: float, trial: int, index: int,
+                trace: list | None) -> Attempt:
+        from pipeline.servo.control import servo_velocity
+        from pipeline.servo.descriptor import describe_surface
+
+        cfg, cell, robot = self.cfg, self.cell, self.cell.robot
+        intr: Intrinsics = cell.intrinsics
+        pattern = self._pattern(cand)
+        u0, v0 = int(round(cand.u)), int(round(cand.v))
+        target = int(frame.body_ids[v0, u0]) if (0 <= v0 < intr.height and 0 <= u0 < intr.width) \
+            else -1
+        target = target if target in cell.boxes else -1
+        att = Attempt(trial=trial, index=index, planner=self.name, pattern=pattern,
+                      g_opt=[float(cand.u), float(cand.v)], target_body=target,
+                      target_type=cell.boxes[target]["type"] if target >= 0 else "",
+                      planning_s=planning_s)
+        # Dex-Net: the servo target is its own point, fixed in the world.
+        fixed_point_world = None
+        if getattr(cand, "grasp_class", None) is None and hasattr(cand, "point_cam"):
+            T = frame.T_world_cam
+            fixed_point_world = T[:3, :3] @ np.asarray(cand.point_cam) + T[:3, 3]
+
+        q = robot.joints()
+        seed = np.array([cand.u, cand.v], np.float64)
+        limit_hits = 0
+        steps_max = int(math.ceil(float(cfg.servo.timeout_s) / self.dt))
+        converged = False
+        for step in range(steps_max + 1):
+            t0 = time.perf_counter()
+            if step > 0:
+                frame = self._render()
+            td = time.perf_counter()
+            feats, reason = describe_surface(frame.depth_m, intr, seed, self.descriptor_cfg)
+            self.timings["descriptor_s"].append(time.perf_counter() - td)
+            if feats is None:
+                att.outcome = "lost_target"
+                break
+            T_cam_world = np.linalg.inv(frame.T_world_cam)
+            if fixed_point_world is not None:
+                centre = T_cam_world[:3, :3] @ fixed_point_world + T_cam_world[:3, 3]
+                if centre[2] <= 1e-3:
+                    att.outcome = "lost_target"
+                    break
+                seed = np.array([intr.fx * centre[0] / centre[2] + intr.cx,
+                                 intr.fy * centre[1] / centre[2] + intr.cy])
+            else:
+                centre = feats.center_cam
+                seed = None  # g′ of this frame, carried to the next (below)
+            g_world = frame.T_world_cam[:3, :3] @ np.asarray(feats.center_cam) + \
+                frame.T_world_cam[:3, 3]
+            cmd = servo_velocity(centre, feats.normal_cam, feats.warped_long, feats.warped_short,
+                                 pattern, self.servo_cfg, self.dt)
+            if trace is not None:
+                trace.append({"attempt": index, "step": step, "t": att.servo_s,
+                              "T_world_cam": frame.T_world_cam.copy(),
+                              "depth": frame.depth_m if step == 0 else None,
+                              "g": np.asarray(feats.center_px, np.float64).copy(),
+                              "error": np.asarray(cmd.error).copy(),
+                              "surface": feats})
+            att.final_error = [float(x) for x in np.abs(cmd.error[:3])] + [
+                float(np.degrees(np.linalg.norm(cmd.error[3:])))]
+            if cmd.converged:
+                converged = True
+                break
+            if step == steps_max:
+                break
+            q, clamped = self._move_twist(q, np.asarray(cmd.velocity, np.float64))
+            if fixed_point_world is None:
+                # The next seed is this g′, moved into the next image by the camera's own motion
+                # (forward kinematics): the paper seeds with the previous g′; at 30 Hz and up to
+                # 0.5 m/s the image moves tens of pixels between frames.
+                seed = _project(robot.camera_pose(), g_world, intr, feats.center_px)
+            att.servo_steps += 1
+            att.servo_s += self.dt
+            self.timings["control_step_s"].append(time.perf_counter() - t0)
+            limit_hits = limit_hits + 1 if clamped else 0
+            if limit_hits >= 10:
+                att.outcome = "joint_limits"
+                break
+            if self._collides(q, target):
+                att.outcome = "collision"
+                break
+        if att.outcome:
+            return self._go_home(att)
+        if not converged:
+            att.outcome = "timeout"
+            return self._go_home(att)
+        return self._grasp_and_place(att, q, pattern, target)
+
+    def _grasp_and_place(self, att: Attempt, q: np.ndarray, pattern: str, target: int) -> Attempt:
+        cfg, cell, robot = self.cfg, self.cell, self.cell.robot
+        m = cfg.motion
+        # Approach along the camera axis: from d* to the lips touching, then the press.
+        from pipeline.robot.urdf_builder import CUP_TIP_Z
+
+        travel = float(cfg.hand.standoff) - CUP_TIP_Z + float(m.press_depth)
+        steps = max(1, int(math.ceil(travel / (float(m.approach_speed) * self.dt))))
+        v = travel / (steps * self.dt)
+        for _ in range(steps):
+            q, _ = self._move_twist(q, np.array([0.0, 0.0, v, 0.0, 0.0, 0.0]))
+            att.motion_s += self.dt
+        hit = [c.other_body for c in robot.in_collision(None, cell.obstacles)
+               if c.other_body != target and not c.robot_link.startswith("cup")]
+        if hit:
+            att.outcome = "collision"
+            return self._go_home(att)
+        gripper = self.gripper_factory()
+        outcome = gripper.try_grasp(pattern, {b: d["mass"] for b, d in cell.boxes.items()})
+        att.seal_reason = outcome.reason
+        att.motion_s += float(m.suction_on_s)
+        if not outcome.sealed:
+            att.outcome = "no_seal"
+            return self._go_home(att)
+        if not outcome.held:
+            att.outcome = "dropped"
+            return self._go_home(att)
+        body = int(outcome.body)
+        att.grasped_body = body
+        att.wrong_target = body != target
+        # Lift straight up (world z) with the box hanging on the constraint.
+        R_cam_world = robot.camera_pose()[:3, :3].T
+        lift_v = R_cam_world @ np.array([0.0, 0.0, float(m.lift_speed)])
+        steps = max(1, int(math.ceil(float(m.lift_height) / (float(m.lift_speed) * self.dt))))
+        z0 = cell.box_pose(body)[0][2]
+        for _ in range(steps):
+            q, _ = self._move_twist(q, np.concatenate([lift_v, np.zeros(3)]))
+            att.motion_s += self.dt
+        lifted = cell.box_pose(body)[0][2] - z0
+        if lifted < 0.5 * float(m.lift_height):
+            gripper.release()
+            att.outcome = "dropped"
+            return self._go_home(att)
+        # Carry to the conveyor, release, return home (point-to-point; the box leaves the cell).
+        q_place = self._place_joints()
+        speed, accel = float(m.max_joint_speed), float(m.max_joint_accel)
+        att.motion_s += move_time(q_place - q, speed, accel) + float(m.suction_off_s)
+        gripper.release()
+        cell.remove_box(body)
+        att.motion_s += move_time(robot.home_q() - q_place, speed, accel)
+        robot.set_joints(robot.home_q())
+        cell.settle()
+        att.outcome = "success"
+        return att
+
+    def _go_home(self, att: Attempt) -> Attempt:
+        robot = self.cell.robot
+        q = robot.joints()
+        att.motion_s += move_time(robot.home_q() - q, float(self.cfg.motion.max_joint_speed),
+                                  float(self.cfg.motion.max_joint_accel))
+        robot.set_joints(robot.home_q())
+        self.cell.settle()
+        return att
+
+    # ------------------------------------------------------------------ one trial
+    def run_trial(self, trial: int, rng_heap: np.random.Generator, rng_plan: np.random.Generator,
+                  keep_trace: bool = False) -> TrialResult:
+        ev = self.cfg.evaluate
+        self.cell.reset(rng_heap, int(ev.boxes_per_trial))
+        boxes = len(self.cell.boxes)
+        attempts: list[Attempt] = []
+        failures: dict[int, int] = {}
+        trace: list[dict] | None = [] if keep_trace else None
+        end = "max_attempts"
+        for index in range(int(ev.max_attempts_per_trial)):
+            if not self.cell.boxes_in_bin():
+                end = "bin_empty"
+                break
+            frame, cands, planning_s = self.plan_at_home(rng_plan)
+            if not cands:
+                end = "no_grasp"
+                break
+            att = self.attempt(frame, cands[0], planning_s, trial, index, trace)
+            attempts.append(att)
+            if att.outcome != "success":
+                failures[att.target_body] = failures.get(att.target_body, 0) + 1
+                if failures[att.target_body] >= int(ev.max_failures_per_target):
+                    end = "max_failures"
+                    break
+        else:
+            if not self.cell.boxes_in_bin():
+                end = "bin_empty"
+        picked = sum(a.outcome == "success" for a in attempts)
+        return TrialResult(trial=trial, planner=self.name, boxes=boxes, picked=picked, end=end,
+                           attempts=attempts, trace=trace or [])

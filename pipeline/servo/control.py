@@ -1,0 +1,308 @@
+"""The 2.5D visual servoing law of the paper (Sec. 5.2, Eqs. 15–27).
+
+Frames and units: everything is in the *current* camera frame, OpenCV axes (x right, y down,
+z forward), metres, radians, seconds. The commanded twist ``[V; Ω]`` (6,) is the velocity of the
+camera frame's origin (m/s) and its angular velocity (rad/s), both expressed in that camera
+frame — what :func:`pipeline.servo.jacobian.camera_jacobian` maps joint velocities to.
+
+Error (Eq. 15) ``e = [p_e − p_e*; uθ]`` (6,):
+
+* ``p_e = [X/Z, Y/Z, log Z]`` (Eq. 16) from the surface centre ``g' = (X, Y, Z)`` in the camera
+  frame (:func:`current_features`);
+* ``p_e* = [0, off/d*, log d*]`` (Eq. 17), ``off`` = −cup_offset for L, 0 for B, +cup_offset for
+  R (Eq. 18; :func:`target_features`). This matches ``pipeline.robot.target_pose``: at the
+  target pose the surface centre is seen at camera ``(0, off, d*)``, i.e. under the active cup;
+* ``uθ`` (Eqs. 24–27, :func:`rotation_error`) is the rotation of the current camera relative to
+  the target camera, so that ``d(uθ)/dt ≈ Ω`` (the ``I3`` block of Eq. 19).
+
+Interaction matrix (Eqs. 19–22, :func:`interaction_matrix`), with ``ρ = Z/d*`` so ``d*ρ = Z``::
+
+    M = [[L_v / (d* ρ), L_w],      L_v = [[-1, 0, x], [0, -1, y], [0, 0, -1]]
+         [0,            I3 ]]      L_w = [[xy, -(1+x²), y], [1+y², -xy, -x], [-y, x, 0]]
+
+(derived for a static point: ``Ṗ = −V − Ω × P`` gives ``ẋ``, ``ẏ`` as usual and
+``d(log Z)/dt = −V_z/Z − yΩ_x + xΩ_y``, which is the paper's third row).
+Its inverse is block upper-triangular: ``M⁻¹ = [[Z L_v⁻¹, −Z L_v⁻¹ L_w], [0, I3]]`` with
+``L_v⁻¹ = [[-1, 0, -x], [0, -1, -y], [0, 0, -1]]``.
+
+Control law (Eq. 23): ``[V; Ω] = −λ_eff M⁻¹ e``, i.e. ``Ω = −λ_eff uθ`` and
+``V = −λ_eff Z L_v⁻¹ (e_p − L_w uθ)``.
+
+Choices (documented here because the paper leaves them open):
+
+* **Gain per control step** (``ServoConfig.gain_per_step``, default True). Eq. 23 is a
+  continuous law and the paper sets λ = 0.4. Read as 0.4 s⁻¹ the error would shrink by e only
+  every 2.5 s (a 0.4 m approach would take ~15 s), incompatible with the paper's > 1000 picks
+  per hour. We therefore read λ as the discrete gain of one control iteration, as ViSP-style
+  loops do (``v = −λ L⁻¹ e`` sent for one period): ``λ_eff = λ / dt``, so one period ``dt``
+  removes the fraction λ of the error (to first order). ``gain_per_step=False`` gives the
+  literal continuous law ``λ_eff = λ`` (1/s) and ignores ``dt``.
+* **Speed limits**: the raw twist is scaled by one common factor
+  ``s = min(1, v_max/|V|, ω_max/|Ω|)`` (``ServoConfig.uniform_clamp``, default True). Both the
+  linear and the angular part keep their direction *and* their ratio, so the coupling term
+  ``−Z L_v⁻¹ L_w uθ`` of V still matches Ω and every error component keeps decaying along the
+  same (straight-line) path, only slower. ``uniform_clamp=False`` scales the linear and the
+  angular part independently (each keeps its direction, the coupling is lost while clamped).
+* **Normal direction**: the project reports surface normals pointing *towards* the camera
+  (``normal_cam · center_cam < 0``); the paper's ``n`` of Eq. 24 is the direction the camera Z
+  must align with, i.e. pointing *away* from the camera into the surface. We use
+  ``n = −normal_cam / |normal_cam|``.
+* **Unit rotation axes**: Eq. 24 writes ``(n × n_Z) θ``; ``|n × n_Z| = sin θ``, so taken
+  literally the term would be ≈ θ² for small angles. We use the unit axis
+  ``(n × n_Z)/|n × n_Z|`` so each term has magnitude θ (the angle-axis ``uθ`` the name and the
+  ``I3`` block require). θ is computed as ``atan2(|a × b|, a · b)`` (same as the arccos of
+  Eqs. 25–27, accurate near 0).
+* **Axes are lines**: a surface axis ``ñ`` and ``−ñ`` are the same line. Each warped axis is
+  flipped, if needed, so that its angle to camera X is ≤ 90°; then the one (long or short) with
+  the smaller angle is used (Eq. 24: long if ``θ_l < θ_s``, otherwise short).
+* **Warped axes live in the image plane**: the descriptor's warped-perspective axes ``ñ_l``,
+  ``ñ_s`` are directions in the camera XY plane (the fronto-parallel view of the surface). Any z
+  component is dropped before the second term is computed, so that term is a pure rotation
+  about camera Z and does not count the tilt again (the first term handles the tilt). For 3D
+  in-surface axes that are not warped yet, :func:`warp_axis` does the warp (rotates them with
+  the minimal rotation taking ``n`` onto ``n_Z``).
+* **Convergence**: ``|x − x*| < tolerance_xy``, ``|y − y*| < tolerance_xy`` (normalised image
+  coordinates), ``|log Z − log d*| < tolerance_log_z`` and ``|uθ| < tolerance_rot_deg``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+_N_X = np.array([1.0, 0.0, 0.0])
+_N_Z = np.array([0.0, 0.0, 1.0])
+_OFF_SIGN = {"L": -1.0, "B": 0.0, "R": 1.0}  # Eq. 18, in units of cup_offset
+
+
+@dataclass
+class ServoConfig:
+    """Parameters of the 2.5D visual servoing law (paper Sec. 5.2). Metres, radians, seconds."""
+
+    gain: float = 0.4  # λ of Eq. 23 (per control step when gain_per_step, else 1/s)
+    standoff: float = 0.15  # d* (m), Eqs. 17, 22, 23
+    cup_offset: float = 0.035  # |off| of Eq. 18 (m)
+    tolerance_xy: float = 0.01  # converged when |x − x*|, |y − y*| (normalised coords) below ...
+    tolerance_log_z: float = 0.01  # ... |log Z − log d*| below this ...
+    tolerance_rot_deg: float = 1.0  # ... and |uθ| below this (degrees)
+    max_linear_speed: float = 0.5  # m/s, camera (clamp keeping the direction)
+    max_angular_speed: float = 1.5  # rad/s
+    gain_per_step: bool = True  # λ is the discrete gain of one period dt: λ_eff = λ/dt
+    uniform_clamp: bool = True  # one scale factor for V and Ω (keeps their ratio)
+
+
+@dataclass
+class ServoCommand:
+    """One output of :func:`servo_velocity`.
+
+    Attributes:
+        velocity: (6,) camera-frame twist ``[V (m/s), Ω (rad/s)]`` after the speed clamp.
+        error: (6,) ``e = [p_e − p_e*; uθ]`` of Eq. 15 (normalised coords, log-metres, rad).
+        converged: every tolerance of :class:`ServoConfig` met.
+        raw_velocity: (6,) the twist of Eq. 23 before the clamp.
+        scale: the clamp factor(s) applied, ≤ 1 (the smaller one when clamped separately).
+        feature_error: ``|p_e − p_e*|``.
+        rotation_error_deg: ``|uθ|`` in degrees.
+        linear_speed: ``|V|`` after the clamp, m/s.
+        angular_speed: ``|Ω|`` after the clamp, rad/s.
+        axis_used: "long" or "short": which warped axis camera X is aligned with (None when
+            neither has an image-plane direction).
+    """
+
+    velocity: np.ndarray
+    error: np.ndarray
+    converged: bool
+    raw_velocity: np.ndarray
+    scale: float
+    feature_error: float
+    rotation_error_deg: float
+    linear_speed: float
+    angular_speed: float
+    axis_used: Optional[str]
+
+
+def _pattern_name(pattern) -> str:
+    name = getattr(pattern, "name", pattern)  # accepts "L" or GraspClass.L
+    if name not in _OFF_SIGN:
+        raise ValueError(f"grasp pattern must be one of L, R, B (got {pattern!r})")
+    return name
+
+
+def _vec3(v, what: str) -> np.ndarray:
+    a = np.asarray(v, dtype=np.float64).reshape(-1)
+    if a.shape != (3,) or not np.all(np.isfinite(a)):
+        raise ValueError(f"{what} must be a finite (3,) vector, got {v!r}")
+    return a
+
+
+def _angle(a: np.ndarray, b: np.ndarray) -> float:
+    """Angle between two vectors (rad), atan2 form of the arccos of Eqs. 25–27."""
+    return math.atan2(float(np.linalg.norm(np.cross(a, b))), float(a @ b))
+
+
+def _axis_angle_to(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``(a × b)/|a × b| · θ(a, b)``: the rotation taking direction ``a`` onto ``b`` (3,)."""
+    c = np.cross(a, b)
+    s = float(np.linalg.norm(c))
+    if s < 1e-12:
+        return np.zeros(3)  # parallel (θ = 0); antiparallel cannot happen for visible surfaces
+    return c / s * _angle(a, b)
+
+
+def target_features(pattern, cfg: ServoConfig | None = None) -> np.ndarray:
+    """``p_e*`` (3,) of Eqs. 17–18: ``[0, off/d*, log d*]``, off = −/0/+ cup_offset for L/B/R."""
+    cfg = cfg or ServoConfig()
+    off = _OFF_SIGN[_pattern_name(pattern)] * cfg.cup_offset
+    return np.array([0.0, off / cfg.standoff, math.log(cfg.standoff)])
+
+
+def current_features(center_cam) -> np.ndarray:
+    """``p_e`` (3,) of Eq. 16: ``[X/Z, Y/Z, log Z]`` of the surface centre (camera frame, m)."""
+    X, Y, Z = _vec3(center_cam, "center_cam")
+    if Z <= 0:
+        raise ValueError(f"the surface centre must be in front of the camera (Z > 0), got Z={Z}")
+    return np.array([X / Z, Y / Z, math.log(Z)])
+
+
+def warp_axis(axis_cam, normal_cam) -> np.ndarray:
+    """A 3D in-surface axis seen in the fronto-parallel (warped) view, camera frame (3,).
+
+    Rotates ``axis_cam`` by the minimal rotation that takes the away-from-camera normal
+    ``n = −normal_cam`` onto camera Z (what the warped-perspective transformation of Sec. 5.1
+    does to the surface), so the result lies in the camera XY plane. ``normal_cam`` points
+    towards the camera (project convention). Returns a unit vector with z = 0.
+    """
+    a = _vec3(axis_cam, "axis_cam")
+    n = -_vec3(normal_cam, "normal_cam")
+    n = n / np.linalg.norm(n)
+    rv = _axis_angle_to(n, _N_Z)
+    th = float(np.linalg.norm(rv))
+    if th > 0:
+        k = rv / th  # Rodrigues
+        a = a * math.cos(th) + np.cross(k, a) * math.sin(th) + k * (k @ a) * (1 - math.cos(th))
+    a = np.array([a[0], a[1], 0.0])
+    norm = np.linalg.norm(a)
+    if norm < 1e-9:
+        raise ValueError("axis_cam is parallel to the normal")
+    return a / norm
+
+
+def _line_term(axis: np.ndarray) -> tuple[float, np.ndarray] | None:
+    """(angle to X, rotation term) of one warped axis taken as a line in the image plane."""
+    a = np.array([axis[0], axis[1], 0.0])  # image-plane direction (see module docstring)
+    norm = float(np.linalg.norm(a))
+    if norm < 1e-9:
+        return None
+    a /= norm
+    if a @ _N_X < 0:  # an axis is a line: take the direction within 90° of X
+        a = -a
+    return _angle(a, _N_X), _axis_angle_to(a, _N_X)
+
+
+def _rotation_error(normal_cam, warped_long, warped_short) -> tuple[np.ndarray, Optional[str]]:
+    n_towards = _vec3(normal_cam, "normal_cam")
+    norm = float(np.linalg.norm(n_towards))
+    if norm < 1e-12:
+        raise ValueError("normal_cam has zero length")
+    n = -n_towards / norm  # paper's n: the direction camera Z must align with (away from camera)
+    u_theta = _axis_angle_to(n, _N_Z)  # first term of Eq. 24 (unit axis × θ_{n,n_Z})
+    long_ = _line_term(_vec3(warped_long, "warped_long"))
+    short = _line_term(_vec3(warped_short, "warped_short"))
+    if long_ is not None and (short is None or long_[0] < short[0]):
+        return u_theta + long_[1], "long"
+    if short is not None:
+        return u_theta + short[1], "short"
+    return u_theta, None
+
+
+def rotation_error(normal_cam, warped_long, warped_short) -> np.ndarray:
+    """``uθ`` (3,) of Eqs. 24–27, radians, current camera frame.
+
+    ``uθ = u(n, n_Z) θ(n, n_Z) + u(ñ, n_X) θ(ñ, n_X)`` with ``u(a, b) = (a × b)/|a × b|``:
+    the first term takes the away-from-camera normal ``n = −normal_cam`` onto camera Z, the
+    second the warped axis ``ñ`` (long or short, whichever line is nearer to camera X, each
+    signed to within 90° of X, z dropped) onto camera X. ``Ω = −λ uθ`` turns the camera's Z
+    towards ``n`` and its X towards ``ñ``.
+
+    Args:
+        normal_cam: (3,) surface normal pointing towards the camera (project convention).
+        warped_long, warped_short: (3,) warped-perspective long and short axes (image-plane
+            directions; sign and length do not matter).
+    """
+    return _rotation_error(normal_cam, warped_long, warped_short)[0]
+
+
+def interaction_matrix(p_e, Z: float, cfg: ServoConfig | None = None) -> np.ndarray:
+    """``M`` (6, 6) of Eqs. 19–22: ``[[L_v/(d* ρ), L_w], [0, I3]]``, ρ = Z/d*.
+
+    ``p_e`` (3,) current features (only x, y are used), ``Z`` the centre's depth (m).
+    """
+    cfg = cfg or ServoConfig()
+    x, y = float(p_e[0]), float(p_e[1])
+    rho = Z / cfg.standoff
+    L_v = np.array([[-1.0, 0.0, x], [0.0, -1.0, y], [0.0, 0.0, -1.0]])
+    L_w = np.array([[x * y, -(1 + x * x), y], [1 + y * y, -x * y, -x], [-y, x, 0.0]])
+    M = np.zeros((6, 6))
+    M[:3, :3] = L_v / (cfg.standoff * rho)
+    M[:3, 3:] = L_w
+    M[3:, 3:] = np.eye(3)
+    return M
+
+
+def clamp_twist(twist, cfg: ServoConfig | None = None) -> tuple[np.ndarray, float]:
+    """The twist (6,) limited to ``max_linear_speed`` / ``max_angular_speed``, and the scale.
+
+    Uniform (default): one factor for all six components. Otherwise the linear and angular
+    parts are scaled separately (the returned scale is the smaller factor). Directions are kept.
+    """
+    cfg = cfg or ServoConfig()
+    t = np.asarray(twist, dtype=np.float64).reshape(6)
+    v, w = float(np.linalg.norm(t[:3])), float(np.linalg.norm(t[3:]))
+    s_v = min(1.0, cfg.max_linear_speed / v) if v > 0 else 1.0
+    s_w = min(1.0, cfg.max_angular_speed / w) if w > 0 else 1.0
+    if cfg.uniform_clamp:
+        s = min(s_v, s_w)
+        return t * s, s
+    return np.concatenate([t[:3] * s_v, t[3:] * s_w]), min(s_v, s_w)
+
+
+def servo_velocity(center_cam, normal_cam, warped_long, warped_short, pattern,
+                   cfg: ServoConfig | None = None, dt: float | None = None) -> ServoCommand:
+    """Eq. 23: the camera twist that drives ``e`` to zero, clamped to the speed limits.
+
+    Args:
+        center_cam: (3,) surface centre g' in the current camera frame, metres (Z > 0).
+        normal_cam: (3,) surface normal towards the camera.
+        warped_long, warped_short: (3,) warped-perspective surface axes (image-plane directions).
+        pattern: "L", "B" or "R" (or an enum member with that name).
+        cfg: the servo parameters.
+        dt: the control period (s); required when ``cfg.gain_per_step`` (λ_eff = λ/dt).
+
+    Returns:
+        :class:`ServoCommand` with the camera-frame twist ``[V; Ω]`` (6,).
+    """
+    cfg = cfg or ServoConfig()
+    if cfg.gain_per_step:
+        if dt is None or dt <= 0:
+            raise ValueError("servo_velocity needs the control period dt > 0 when gain_per_step")
+        lam = cfg.gain / dt
+    else:
+        lam = cfg.gain
+    center = _vec3(center_cam, "center_cam")
+    p_e = current_features(center)
+    e_p = p_e - target_features(pattern, cfg)
+    u_theta, axis_used = _rotation_error(normal_cam, warped_long, warped_short)
+    e = np.concatenate([e_p, u_theta])
+    M = interaction_matrix(p_e, center[2], cfg)
+    raw = -lam * np.linalg.solve(M, e)
+    vel, scale = clamp_twist(raw, cfg)
+    rot_deg = math.degrees(float(np.linalg.norm(u_theta)))
+    converged = bool(abs(e_p[0]) < cfg.tolerance_xy and abs(e_p[1]) < cfg.tolerance_xy
+                     and abs(e_p[2]) < cfg.tolerance_log_z and rot_deg < cfg.tolerance_rot_deg)
+    return ServoCommand(velocity=vel, error=e, converged=converged, raw_velocity=raw,
+                        scale=scale, feature_error=float(np.linalg.norm(e_p)),
+                        rotation_error_deg=rot_deg, linear_speed=float(np.linalg.norm(vel[:3])),
+                        angular_speed=float(np.linalg.norm(vel[3:])), axis_used=axis_used)

@@ -1,0 +1,231 @@
+"""Surface feature descriptor (paper Sec. 5.1), on synthetic depth images of planar rectangles.
+
+Camera: the SR300 model of the project, 416 × 416, fx = fy = 411.7 px, principal point
+(207.5, 207.5); OpenCV frame (x right, y down, z forward), metres. A pixel (u, v) sees the ray
+r = ((u − 207.5) / 411.7, (v − 207.5) / 411.7, 1), and a depth z the point z · r.
+At z = 0.5 m one pixel is 0.5 / 411.7 = 1.21 mm.
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace as NS
+
+import numpy as np
+import pytest
+
+from pipeline.camera.geometry import Intrinsics, project
+from pipeline.camera.sensor import apply_sensor_model
+from pipeline.servo.descriptor import DescriptorConfig, describe_surface
+
+SR300 = Intrinsics(416, 416, 411.7, 411.7, 207.5, 207.5)
+FLOOR_Z = 0.6
+C25, S25 = np.cos(np.radians(25)), np.sin(np.radians(25))
+C20, S20 = np.cos(np.radians(20)), np.sin(np.radians(20))
+
+
+def rect(center, axis_a, axis_b, half_a, half_b):
+    """A planar rectangle: centre, two orthonormal in-plane axes and half-lengths along them."""
+    return (np.asarray(center, float), np.asarray(axis_a, float), np.asarray(axis_b, float),
+            half_a, half_b)
+
+
+def render(rects, floor_z=FLOOR_Z, intr=SR300):
+    """(depth (H, W) float32, [hit mask per rectangle]): nearest rectangle per ray, else a level
+    floor at ``floor_z`` (None: no data)."""
+    u = np.arange(intr.width)[None, :]
+    v = np.arange(intr.height)[:, None]
+    r = np.stack(np.broadcast_arrays((u - intr.cx) / intr.fx, (v - intr.cy) / intr.fy,
+                                     np.ones((1, 1))), axis=-1)  # (H, W, 3)
+    depth = np.full((intr.height, intr.width), np.inf if floor_z is None else floor_z)
+    hits = []
+    for c, a, b, ha, hb in rects:
+        n = np.cross(a, b)
+        z = (n @ c) / (r @ n)  # ray-plane intersection; r_z = 1 so this is the z-depth
+        rel = z[..., None] * r - c
+        hit = (np.abs(rel @ a) <= ha) & (np.abs(rel @ b) <= hb) & (z > 0)
+        hits.append(hit)
+        depth = np.where(hit & (z < depth), z, depth)
+    depth[~np.isfinite(depth)] = 0.0
+    return depth.astype(np.float32), hits
+
+
+def angle_deg(a, b):
+    return float(np.degrees(np.arccos(np.clip(abs(np.dot(a, b)), -1.0, 1.0))))
+
+
+# Two level boxes side by side (top faces only): A (higher) over x ∈ [−0.10, 0], y ∈ [−0.05,
+# 0.05] at z = 0.50; B over x ∈ [0, 0.10] at z = 0.52, 2 cm lower.
+# A's pixels: (u − 207.5) · 0.5 / 411.7 ∈ [−0.10, 0] → u − 207.5 ∈ [−82.34, 0] → u = 126..207,
+# 82 columns; v − 207.5 ∈ [−41.17, 41.17] → v = 167..248, 82 rows: 82 × 82 = 6724 pixels.
+BOX_A = rect([-0.05, 0.0, 0.50], [1, 0, 0], [0, 1, 0], 0.05, 0.05)
+BOX_B_STEP = rect([0.05, 0.0, 0.52], [1, 0, 0], [0, 1, 0], 0.05, 0.05)
+A_PIXELS = 82 * 82
+
+
+def test_tilted_rectangle_normal_centre_axes_lengths():
+    # A 0.20 × 0.12 m rectangle centred at (0.03, −0.02, 0.5), tilted 25° about camera x: long
+    # axis (1, 0, 0), short side along (0, cos 25°, sin 25°) (going down the image it recedes);
+    # normal towards the camera (0, sin 25°, −cos 25°) = (0, 0.4226, −0.9063).
+    centre = np.array([0.03, -0.02, 0.5])
+    scene = [rect(centre, [1, 0, 0], [0, C25, S25], 0.10, 0.06)]
+    depth, _ = render(scene)
+    # Centre in pixels: u = 207.5 + 411.7 · 0.03 / 0.5 = 232.202, v = 207.5 − 16.468 = 191.032.
+    g_true = np.array([232.202, 191.032])
+    np.testing.assert_allclose(project(centre, SR300), g_true, atol=1e-3)
+    seed = (g_true[0] + 40, g_true[1] + 20)  # off-centre: g' is refined to the centre
+    f, reason = describe_surface(depth, SR300, seed, DescriptorConfig())
+    assert reason == "" and f is not None
+    n_true = np.array([0.0, S25, -C25])
+    assert np.degrees(np.arccos(np.clip(f.normal_cam @ n_true, -1, 1))) < 0.5  # signed: towards
+    assert f.normal_cam @ f.center_cam < 0
+    assert np.degrees(np.arccos(np.clip(f.plane[:3] @ n_true, -1, 1))) < 0.5
+    # Eq. 11's D̂: n̂ · P + D̂ = 0 at the centre → D̂ = −n·c = 0.02 · 0.4226 + 0.5 · 0.9063 = 0.4616.
+    assert f.plane[3] == pytest.approx(-n_true @ centre, abs=1e-3)
+    assert np.linalg.norm(f.center_px - g_true) < 1.0
+    assert np.linalg.norm(f.center_cam - centre) < 0.002
+    assert angle_deg(f.long_axis_cam, [1, 0, 0]) < 0.5
+    assert angle_deg(f.short_axis_cam, [0, C25, S25]) < 0.5
+    # Pixel footprint ≈ 1.2–1.4 mm; the rectangle of pixel centres is up to one footprint short.
+    assert f.long_length == pytest.approx(0.20, abs=0.003)
+    assert f.short_length == pytest.approx(0.12, abs=0.003)
+    # Warped perspective: R0 with R0 Z = −n is the rotation by +25° about x; R0ᵀ keeps
+    # (1, 0, 0) and takes the short axis ±(0, cos 25°, sin 25°) to ±(0, 1, 0).
+    assert angle_deg(f.warped_long, [1, 0, 0]) < 0.5
+    assert angle_deg(f.warped_short, [0, 1, 0]) < 0.5
+    for w in (f.warped_long, f.warped_short):
+        assert w[2] == 0.0 and np.linalg.norm(w) == pytest.approx(1.0, abs=1e-12)
+    # The paper's settings only (plain window SVD, no rim, no refit; 8-connected): same plane,
+    # same centre; the region loses its one-pixel rim, so the lengths are ~2 px (2.5 mm) shorter.
+    paper = DescriptorConfig(window_hypotheses=0, window_refits=0, rim=0, refine=False,
+                             connectivity=8)
+    fp, _ = describe_surface(depth, SR300, seed, paper)
+    assert np.degrees(np.arccos(np.clip(fp.normal_cam @ n_true, -1, 1))) < 0.5
+    np.testing.assert_allclose(fp.normal_cam, fp.plane[:3])
+    assert np.linalg.norm(fp.center_px - g_true) < 1.0
+    assert 0.0 < f.long_length - fp.long_length < 0.004
+
+
+def test_plane_filling_the_image():
+    # The 25° plane of the previous test through (0, 0, 0.5), filling the whole image (no floor).
+    # Every pixel is on it: the border rows / columns have no Eq. 14 normal (no neighbour) and
+    # come back through the rim, so the region is all 416 × 416 = 173056 pixels.
+    depth, _ = render([rect([0, 0, 0.5], [1, 0, 0], [0, C25, S25], 1.0, 1.0)], floor_z=None)
+    assert depth.min() > 0
+    f, reason = describe_surface(depth, SR300, (300, 100))
+    assert reason == "" and f.num_pixels == 416 * 416
+    assert np.degrees(np.arccos(np.clip(f.normal_cam @ [0, S25, -C25], -1, 1))) < 0.01
+    # The image's footprint is symmetric about the plane's x = 0 line, so the centre projects
+    # to u = 207.5 (v is not the image centre: the plane recedes downwards).
+    assert f.center_px[0] == pytest.approx(207.5, abs=0.5)
+
+
+def test_noisy_depth_needs_normal_smoothing():
+    # The project's SR300 sensor model (conf/sensor/sr300.yaml): σ = 0.0035 z² = 0.9 mm at
+    # 0.5 m, half the pixels at depth jumps dropped, 1/8 mm quantisation. Eq. 14's central
+    # differences span 2 pixels = 2.4 mm, so a single n_p is tens of degrees off and Eq. 13
+    # (≈ 12.8°) rejects nearly everything; averaging n_p over 5 × 5 pixels recovers the face.
+    sr300 = NS(enabled=True, noise_sigma_at_1m=0.0035, edge_jump=0.01, edge_dropout_prob=0.5,
+               quantisation_step=0.000125)
+    centre = np.array([0.03, -0.02, 0.5])
+    ideal, hits = render([rect(centre, [1, 0, 0], [0, C25, S25], 0.10, 0.06)])
+    depth = apply_sensor_model(ideal, sr300, np.random.default_rng(0))
+    seed = (272, 211)
+    assert describe_surface(depth, SR300, seed) == (None, "region_too_small")
+    f, reason = describe_surface(depth, SR300, seed, DescriptorConfig(normal_smoothing=2))
+    assert reason == ""
+    assert np.degrees(np.arccos(np.clip(f.normal_cam @ [0, S25, -C25], -1, 1))) < 0.5
+    assert np.linalg.norm(f.center_px - project(centre, SR300)) < 1.0
+    assert not (f.region & ~hits[0]).any()
+    assert f.num_pixels > 0.95 * hits[0].sum()  # only dropped / noisy rim pixels are missing
+
+
+def test_region_stops_at_depth_step_between_touching_boxes():
+    depth, hits = render([BOX_A, BOX_B_STEP])
+    assert hits[0].sum() == A_PIXELS
+    f, reason = describe_surface(depth, SR300, (160, 200))
+    assert reason == ""
+    # Every pixel of A and nothing else: the step (2 cm ≫ ε1 = 4 mm) fails Eq. 12; A's own rim
+    # pixels (their Eq. 14 stencil reaches over the step) come back through the rim rule.
+    np.testing.assert_array_equal(f.region, hits[0])
+    assert f.num_pixels == A_PIXELS
+    # Centre (−0.05, 0, 0.5) → u = 207.5 − 411.7 · 0.1 = 166.33, v = 207.5.
+    assert np.linalg.norm(f.center_px - [166.33, 207.5]) < 1.0
+    np.testing.assert_allclose(f.normal_cam, [0, 0, -1], atol=1e-6)
+    # Level square 0.1 × 0.1: lengths one footprint (1.2 mm) short at most.
+    assert 0.0975 < f.short_length <= f.long_length < 0.1005
+    # Level surface: the warped perspective is the identity.
+    np.testing.assert_allclose(f.warped_long, f.long_axis_cam, atol=1e-9)
+    np.testing.assert_allclose(f.warped_short, f.short_axis_cam, atol=1e-9)
+    assert f.warped_long[2] == 0.0 and f.warped_short[2] == 0.0
+
+    # The paper's rules alone (rim = 0) lose A's one-pixel rim: the top and bottom rows and the
+    # left column border the floor (10 cm lower), the right column borders B: 80 × 80 = 6400.
+    f0, _ = describe_surface(depth, SR300, (160, 200), DescriptorConfig(rim=0))
+    assert f0.num_pixels == 80 * 80
+    assert np.linalg.norm(f0.center_px - [166.33, 207.5]) < 1.0
+
+
+def test_seed_on_edge_takes_nearest_region():
+    depth, hits = render([BOX_A, BOX_B_STEP])
+    # u = 207 is A's last column: its Eq. 14 normal straddles the step, so the seed pixel fails
+    # Eq. 13; the nearest rule pixel (u = 206) is in A's region.
+    f, reason = describe_surface(depth, SR300, (207, 200))
+    assert reason == ""
+    np.testing.assert_array_equal(f.region, hits[0])
+
+
+def test_seed_on_depth_spike():
+    # A 1 cm spike at the seed pixel of A: RANSAC finds no plane holding the seed, so the window
+    # plane is A's; the seed fails Eq. 12 and the region is the component of the nearest rule
+    # pixel: all of A but the spike (its four neighbours' n_p are corrupted by it, they are on
+    # A's plane and come back through the rim): 6724 − 1 pixels.
+    depth, hits = render([BOX_A, BOX_B_STEP])
+    depth[200, 160] = 0.49
+    f, reason = describe_surface(depth, SR300, (160, 200))
+    assert reason == "" and f.num_pixels == A_PIXELS - 1
+    assert not f.region[200, 160]
+    np.testing.assert_allclose(f.normal_cam, [0, 0, -1], atol=1e-6)
+
+
+def test_region_stops_at_crease_between_level_and_tilted_box():
+    # B touches A along x = 0 at the same height and goes down at 20°: points
+    # (t cos 20°, y, 0.5 + t sin 20°), t ∈ [0, 0.10]; normal towards the camera (sin 20°, 0, −cos 20°).
+    box_b = rect([0.05 * C20, 0.0, 0.5 + 0.05 * S20], [C20, 0, S20], [0, 1, 0], 0.05, 0.05)
+    depth, hits = render([BOX_A, box_b])
+    assert hits[0].sum() == A_PIXELS
+    f, reason = describe_surface(depth, SR300, (160, 200))
+    assert reason == ""
+    assert np.all(f.region[hits[0]])  # all of A
+    # Beyond A, at most two of B's columns (u = 208, 209): u = 208's stencil straddles the crease
+    # (n_p ~10° off, within ε2), and the rim adds one more column within ε1 of A's plane.
+    extra = f.region & ~hits[0]
+    assert extra.sum() <= 2 * 82
+    assert not extra[:, 210:].any()
+    # B's pixels at t > 1 cm lie more than 4 mm below A's plane and 20° off: nothing far in.
+    assert angle_deg(f.normal_cam, [0, 0, 1]) < 0.5
+    assert np.linalg.norm(f.center_px - [166.33, 207.5]) < 1.5
+    # Seeded on B instead: B's region, B's normal.
+    f_b, _ = describe_surface(depth, SR300, (260, 200))
+    assert not f_b.region[:, :206].any()
+    assert np.degrees(np.arccos(f_b.normal_cam @ [S20, 0, -C20])) < 0.5
+
+
+def test_failures_have_reasons():
+    depth, _ = render([BOX_A, BOX_B_STEP])
+    assert describe_surface(depth, SR300, (500, 10)) == (None, "seed_outside_image")
+    holed = depth.copy()
+    holed[195:206, 155:166] = 0.0
+    assert describe_surface(holed, SR300, (160, 200)) == (None, "no_depth_at_seed")
+    # Region of 6724 pixels < min_pixels.
+    assert describe_surface(depth, SR300, (160, 200), DescriptorConfig(min_pixels=7000)) == (
+        None, "region_too_small")
+    # A 6 × 6-pixel patch in an image without data elsewhere: the window holds its 36 points
+    # (≥ 10), so the plane is fitted; n_p exists only at the inner 4 × 4, the rim brings back
+    # the rest: 36 pixels < 50.
+    patch = np.zeros_like(depth)
+    patch[100:106, 100:106] = 0.5
+    assert describe_surface(patch, SR300, (102, 102)) == (None, "region_too_small")
+    # 3 × 3 = 9 window points < 10.
+    patch[:] = 0.0
+    patch[100:103, 100:103] = 0.5
+    assert describe_surface(patch, SR300, (101, 101)) == (None, "too_few_window_points")
