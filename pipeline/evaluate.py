@@ -183,8 +183,17 @@ def convergence_rows(results: list[TrialResult]) -> list[dict]:
 
 # ------------------------------------------------------------------------------ logs
 def _log_trials(log: StageLog, results: list[TrialResult], intr) -> None:
+    """Every logged trial, control step by control step (timeline ``control_step``; the log
+    time is simulated time at 30 Hz): the robot's link origins, the camera's pose, g′ and the
+    reconstructed surface in the camera frame, the servo errors; per attempt the home depth
+    image (half resolution, under a camera of half-resolution intrinsics) with G_opt."""
+    from types import SimpleNamespace
+
     from pipeline.label import _quat_from_axes
 
+    half = SimpleNamespace(width=intr.width // 2, height=intr.height // 2, fx=intr.fx / 2,
+                           fy=intr.fy / 2, cx=(intr.cx + 0.5) / 2 - 0.5,
+                           cy=(intr.cy + 0.5) / 2 - 0.5)
     tick = 0
     for r in results:
         if not r.trace:
@@ -194,9 +203,20 @@ def _log_trials(log: StageLog, results: list[TrialResult], intr) -> None:
             log.set_time(sequences={"control_step": tick},
                          clock_ns=int(round(tick * 1e9 / 30.0)))
             tick += 1
+            log.log_points(f"{prefix}/robot/links", s["links"],
+                           np.full((len(s["links"]), 3), 200, np.uint8), frame_id="world")
             log.log_camera(f"{prefix}/camera", intr, s["T_world_cam"])
             if s["depth"] is not None:
-                log.log_depth(f"{prefix}/camera/depth", s["depth"])
+                d = s["depth"][::2, ::2]
+                log.log_camera(f"{prefix}/home_camera", half, s["T_world_cam"],
+                               frame_id="home_camera")
+                log.log_depth(f"{prefix}/home_camera/depth", d, frame_id="home_camera")
+                u, v = s["g_opt"]
+                z = float(s["depth"][int(round(v)), int(round(u))])
+                g = np.array([[(u - intr.cx) / intr.fx * z, (v - intr.cy) / intr.fy * z, z]])
+                log.log_points(f"{prefix}/home_camera/g_opt", g, np.array([[255, 40, 40]],
+                                                                           np.uint8),
+                               frame_id="home_camera")
             f = s["surface"]
             log.log_points(f"{prefix}/camera/g_prime", f.center_cam.reshape(1, 3),
                            np.array([[255, 220, 0]], np.uint8))

@@ -507,8 +507,8 @@ TABLE1_COLUMNS = (("top1", "Top 1"), ("top1pct", "Top 1 %"), ("top5pct", "Top 5 
 
 
 @dataclass
-class TrainInfo:
-    """The training artifact the report reads: its folder and manifest."""
+class ArtifactInfo:
+    """An upstream artifact the report reads (train, baseline, evaluate): folder and manifest."""
 
     folder: Path
     manifest: dict
@@ -520,6 +520,9 @@ class TrainInfo:
     @property
     def metrics(self) -> dict:
         return self.manifest["metrics"]
+
+
+TrainInfo = BaselineInfo = EvaluateInfo = ArtifactInfo  # names that say which one is meant
 
 
 def resolve_train(models: Path, version: str, label_version: str | None) -> TrainInfo | None:
@@ -614,22 +617,6 @@ def render_train(trained: TrainInfo | None, tables: dict[str, Table],
 # ---------------------------------------------------------------------- Table 2 (baseline)
 TABLE2_SECTION = "Table 2: grasp points near surface centres, ours vs. Dex-Net (Sec. 8.1.1)"
 BASELINE_NOT_RUN = "Dex-Net-style comparison: not run yet (`make baseline`)."
-
-
-@dataclass
-class BaselineInfo:
-    """The baseline artifact the report reads: its folder, manifest and per-image results."""
-
-    folder: Path
-    manifest: dict
-
-    @property
-    def version(self) -> str:
-        return self.folder.name
-
-    @property
-    def metrics(self) -> dict:
-        return self.manifest["metrics"]
 
 
 def resolve_baseline(root: Path, version: str, gen_version: str,
@@ -758,20 +745,6 @@ FAILURE_MEANING = {
     "timeout": "the servo did not converge in time",
     "lost_target": "the descriptor found no surface at the tracked point",
 }
-
-
-@dataclass
-class EvaluateInfo:
-    folder: Path
-    manifest: dict
-
-    @property
-    def version(self) -> str:
-        return self.folder.name
-
-    @property
-    def metrics(self) -> dict:
-        return self.manifest["metrics"]
 
 
 def resolve_evaluate(root: Path, version: str) -> EvaluateInfo | None:

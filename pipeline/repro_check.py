@@ -29,6 +29,16 @@ STAGES = ("generate", "label", "train", "baseline", "evaluate", "report")
 
 
 
+def _rrd_compare_output(a: Path, b: Path) -> str:
+    """The last lines of ``rerun rrd compare``'s output, to say what differs."""
+    from pipeline.view import rerun_executable
+
+    res = subprocess.run([rerun_executable(), "rrd", "compare", str(a), str(b)],
+                         capture_output=True, text=True)
+    text = (res.stdout + res.stderr).strip().splitlines()
+    return " | ".join(text[-3:]) if text else f"exit status {res.returncode}"
+
+
 def run_pipeline(root: Path, extra: list[str]) -> None:
     for stage in STAGES:
         cmd = [sys.executable, "-m", f"pipeline.{stage}", "experiment=smoke",
@@ -57,7 +67,8 @@ def compare(root_a: Path, root_b: Path) -> list[str]:
                 diffs.append(f"{stage}/{rel}: present in only one run")
             elif rel.endswith(".rrd"):
                 if not rrd_equal(a / rel, b / rel):
-                    diffs.append(f"{stage}/{rel}: Rerun recordings differ (rerun rrd compare)")
+                    diffs.append(f"{stage}/{rel}: Rerun recordings differ (rerun rrd compare: "
+                                 f"{_rrd_compare_output(a / rel, b / rel)})")
             elif fa[rel]["sha256"] != fb[rel]["sha256"]:
                 diffs.append(f"{stage}/{rel}: sha256 differs")
         print(f"[repro-check] {stage} {a.name}: {len(fa)} files compared")

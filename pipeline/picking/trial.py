@@ -109,6 +109,14 @@ def _project(T_world_cam: np.ndarray, point_world: np.ndarray, intr: Intrinsics,
     return np.array([intr.fx * c[0] / c[2] + intr.cx, intr.fy * c[1] / c[2] + intr.cy])
 
 
+def _link_origins(robot) -> np.ndarray:
+    """(L, 3) world positions of the robot's link frames (base first), for the logs."""
+    states = p.getLinkStates(robot.body_id, list(range(p.getNumJoints(
+        robot.body_id, physicsClientId=robot.client))), physicsClientId=robot.client)
+    base = p.getBasePositionAndOrientation(robot.body_id, physicsClientId=robot.client)[0]
+    return np.array([base] + [s[4] for s in states], np.float64)
+
+
 def move_time(dq: np.ndarray, max_speed: float, max_accel: float) -> float:
     """Duration (s) of a synchronised point-to-point move: the slowest joint's trapezoidal
     (or triangular, for short moves) profile at ``max_speed`` (rad/s) and ``max_accel``."""
@@ -268,6 +276,9 @@ class PickRunner:
             if trace is not None:
                 trace.append({"attempt": index, "step": step, "t": att.servo_s,
                               "T_world_cam": frame.T_world_cam.copy(),
+                              "links": _link_origins(robot),
+                              "g_opt": np.array([cand.u, cand.v], np.float64) if step == 0
+                              else None,
                               "depth": frame.depth_m if step == 0 else None,
                               "g": np.asarray(feats.center_px, np.float64).copy(),
                               "error": np.asarray(cmd.error).copy(),

@@ -1,0 +1,38 @@
+"""Tables 2 and 3 of the report, from hand-made manifests."""
+
+from pathlib import Path
+
+from pipeline.report import ArtifactInfo, failures_table, table2_table, table3_table
+
+
+def test_table2_puts_the_paper_beside_every_planner():
+    info = ArtifactInfo(Path("x"), {"metrics": {"table2": {
+        "radius_px": 30.0,
+        "paper": {"within_30px": {"dexnet4": 0.5888, "ours": 0.7916}, "radius_px": 30.0},
+        "rows": [{"planner": "dcnn", "name": "Ours", "images": 10, "no_grasp": 1,
+                  "within_30px": 0.7, "median_distance_px": 12.5},
+                 {"planner": "gqcnn", "name": "GQ", "images": 10, "no_grasp": 0,
+                  "within_30px": 0.4, "median_distance_px": 35.0}]}}})
+    t = table2_table(info)
+    md = t.markdown()
+    assert "58.88 %" in md and "79.16 %" in md  # the paper's rows
+    assert "| this reproduction | Ours | 70.00 % | 10 | 1 | 12.5 |" in md
+    assert t.csv_text().splitlines()[3].startswith("this reproduction,Ours,70.0000,10,1,12.500")
+
+
+def test_table3_rows_and_failures():
+    row = {"planner": "dcnn", "success_rate": 0.75, "attempts": 8, "pph_motion": 1100.0,
+           "wrong_target": 1, **{f"fail_{k}": 0 for k in ("no_seal", "dropped", "collision",
+                                                          "joint_limits", "timeout",
+                                                          "lost_target")},
+           **{f"end_{e}": 0 for e in ("bin_empty", "no_grasp", "max_failures", "max_attempts")}}
+    row["fail_collision"] = 2
+    row["end_bin_empty"] = 1
+    info = ArtifactInfo(Path("x"), {"metrics": {"table3": [row], "paper_table3": [
+        {"system": "Ours (paper)", "hand": "suction (2 cups)", "success": 97.5,
+         "planning_s": 0.034, "pph": "over 1000"}]}})
+    md = table3_table(info).markdown()
+    assert "97.5" in md and "over 1000" in md
+    assert "75.0 %" in md and "1100.0" in md
+    f = failures_table(info).csv_text().splitlines()
+    assert f[1] == "dcnn,0,0,2,0,0,0,1,1,0,0,0"
