@@ -659,15 +659,18 @@ def table2_table(info: BaselineInfo) -> Table:
     key = f"within_{radius:g}px"
     paper = t2["paper"]["within_30px"]
     headers = ["", "planner", f"within {radius:g} px", "images", "no grasp",
-               "median distance (px)"]
-    rows = [["paper", "Dex-Net 4.0", 100.0 * paper["dexnet4"], None, None, None],
-            ["paper", "ours (DCNN)", 100.0 * paper["ours"], None, None, None]]
+               f"within {radius:g} px where a grasp was found", "median distance (px)"]
+    rows = [["paper", "Dex-Net 4.0", 100.0 * paper["dexnet4"], None, None, None, None],
+            ["paper", "ours (DCNN)", 100.0 * paper["ours"], None, None, None, None]]
     for r in t2["rows"]:
-        rows.append(["this reproduction", r["name"], 100.0 * float(r[key]), int(r["images"]),
-                     int(r["no_grasp"]), r["median_distance_px"]])
+        images, missing = int(r["images"]), int(r["no_grasp"])
+        found = images - missing
+        rows.append(["this reproduction", r["name"], 100.0 * float(r[key]), images, missing,
+                     100.0 * float(r[key]) * images / found if found else None,
+                     r["median_distance_px"]])
     return Table("table2_centre_distance", headers, rows,
-                 ["", "", "{:.2f} %", "{}", "{}", "{:.1f}"],
-                 csv_formats=["", "", "{:.4f}", "{}", "{}", "{:.3f}"], text_columns=2)
+                 ["", "", "{:.2f} %", "{}", "{}", "{:.2f} %", "{:.1f}"],
+                 csv_formats=["", "", "{:.4f}", "{}", "{}", "{:.4f}", "{:.3f}"], text_columns=2)
 
 
 def planning_time_table(info: BaselineInfo) -> Table:
@@ -740,7 +743,8 @@ FAILURE_MEANING = {
     "no_seal": "a cup's rim did not lie on one face of one box (edge, corner, small face, "
                "tilt beyond the cup's compliance)",
     "dropped": "sealed, but the active cups cannot hold the box's weight and torque",
-    "collision": "the arm or hand touched the bin or another box",
+    "collision": "the arm or hand touched the bin (a protective stop; other boxes are pushed "
+                 "aside under physics unless evaluate.stop_on_box_contact)",
     "joint_limits": "the servo ran into joint limits",
     "timeout": "the servo did not converge in time",
     "lost_target": "the descriptor found no surface at the tracked point",

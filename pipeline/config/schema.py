@@ -336,6 +336,9 @@ class EvaluateConfig:
     dexnet_variant: str = "gqcnn"  # gqcnn | planarity
     dexnet_pattern: str = "L"  # the cup that serves Dex-Net's single suction point
     dcnn_threshold: Optional[float] = None  # th of Eq. 3 for the closed loop; None: the model's
+    stop_on_box_contact: bool = False  # True: touching any box but the target fails the attempt
+    check_reachability: bool = True  # run-time robot-level check of the planned grasp
+    max_candidates_checked: int = 10
     train_version: str = "latest"
     baseline_version: str = "latest"
     num_trials: int = MISSING

@@ -4,7 +4,13 @@ One **attempt** (``PickRunner.attempt``):
 
 1. **Plan at home** (red loop of Fig. 2): one depth image at the home pose → the planner →
    G_opt (pixel) and its pattern S_opt (L, R or B; the Dex-Net-style planner has one suction
-   point and is served by the ``evaluate.dexnet_pattern`` cup). The planning time is measured.
+   point, served by the ``evaluate.dexnet_pattern`` cup, or by the other one when the robot
+   cannot reach the first without touching the bin or a box: the labelling stage's
+   robot-level check). With ``evaluate.check_reachability`` (default) the DCNN's G_opt is the
+   best-ranked candidate whose target pose passes that same check (IK, joint limits, no
+   contact with the bin or other boxes); the paper takes the top candidate, and its labels
+   carry the robot-level check only through training. The planning time is measured (the
+   check's time is not included).
 2. **Servo** (blue loop): every control period (``servo.control_rate_hz``) a new depth image →
    the surface feature descriptor seeded at the previous g′ (G_opt at first; the previous g′
    is carried into the new image by the camera's known motion, since the image moves tens of
@@ -22,7 +28,8 @@ One **attempt** (``PickRunner.attempt``):
 
 Outcomes of an attempt: ``success``, or the failure ``no_seal``, ``dropped`` (sealed but the
 cups cannot hold the box, or it came off during the lift), ``collision`` (the arm or hand
-touched the bin or another box while servoing or approaching), ``joint_limits`` (the servo ran
+touched the bin while servoing or approaching: a protective stop; touching other boxes pushes
+them, under physics, unless ``evaluate.stop_on_box_contact``), ``joint_limits`` (the servo ran
 into joint limits and could not continue), ``timeout``, ``lost_target`` (the descriptor found
 no surface at the seed). ``wrong_target`` flags a success on another box than the one under
 G_opt at home.
@@ -109,6 +116,13 @@ def _project(T_world_cam: np.ndarray, point_world: np.ndarray, intr: Intrinsics,
     return np.array([intr.fx * c[0] / c[2] + intr.cx, intr.fy * c[1] / c[2] + intr.cy])
 
 
+@dataclass
+class _Probe:
+    u: float
+    v: float
+    point_cam: np.ndarray
+
+
 def _link_origins(robot) -> np.ndarray:
     """(L, 3) world positions of the robot's link frames (base first), for the logs."""
     states = p.getLinkStates(robot.body_id, list(range(p.getNumJoints(
@@ -169,11 +183,63 @@ class PickRunner:
                                                 "render_s": []}
 
     # ------------------------------------------------------------------ helpers
-    def _pattern(self, cand) -> str:
+    def _pattern(self, cand, frame: Frame | None = None, target: int = -1) -> str:
+        """S_opt of the DCNN; for a single suction point (Dex-Net), the cup to put on it."""
         cls = getattr(cand, "grasp_class", None)
-        if cls is None:
-            return str(self.cfg.evaluate.dexnet_pattern)
-        return cls.name
+        if cls is not None:
+            return cls.name
+        preferred = str(self.cfg.evaluate.dexnet_pattern)
+        if frame is None or preferred == "B":
+            return preferred
+        other = {"L": "R", "R": "L"}[preferred]
+        for pattern in (preferred, other):
+            if self._reachable(frame, cand, pattern, target):
+                return pattern
+        return preferred
+
+    def _first_reachable(self, frame: Frame, cands: list):
+        """G_opt, or with ``evaluate.check_reachability`` the best-ranked of the DCNN's
+        candidates whose target pose passes the robot-level check (the first one if none)."""
+        if not bool(self.cfg.evaluate.check_reachability) or \
+                getattr(cands[0], "grasp_class", None) is None:
+            return cands[0]
+        intr = self.cell.intrinsics
+        for cand in cands[: int(self.cfg.evaluate.max_candidates_checked)]:
+            u, v = int(round(cand.u)), int(round(cand.v))
+            z = float(frame.depth_m[v, u])
+            target = int(frame.body_ids[v, u])
+            point = np.array([(cand.u - intr.cx) / intr.fx * z, (cand.v - intr.cy) / intr.fy * z,
+                              z])
+            probe = _Probe(cand.u, cand.v, point)
+            if z > 0 and self._reachable(frame, probe, cand.grasp_class.name,
+                                         target if target in self.cell.boxes else -1):
+                return cand
+        return cands[0]
+
+    def _reachable(self, frame: Frame, cand, pattern: str, target: int) -> bool:
+        """The robot-level check of the labelling stage for a single-cup point: the target camera
+        pose (the cup on the point, camera X along the surface axis nearer the image X) is
+        reachable without touching the bin or another box."""
+        from pipeline.robot.target_pose import target_camera_pose
+        from pipeline.servo.descriptor import describe_surface
+
+        feats, _ = describe_surface(frame.depth_m, self.cell.intrinsics,
+                                    np.array([cand.u, cand.v], np.float64), self.descriptor_cfg)
+        if feats is None:
+            return True  # nothing to check against: keep the preferred cup
+        axes = [(feats.long_axis_cam, feats.warped_long), (feats.short_axis_cam, feats.warped_short)]
+        angles = [abs(w[0]) for _, w in axes]  # |cos| of the angle to X: larger = smaller angle
+        axis, warped = axes[int(np.argmax(angles))]
+        x_axis = axis if warped[0] >= 0 else -axis
+        T = target_camera_pose(np.asarray(cand.point_cam), feats.normal_cam, x_axis, pattern,
+                               standoff=float(self.cfg.hand.standoff),
+                               cup_offset=float(self.cfg.hand.cup_offset))
+        robot = self.cell.robot
+        res = robot.solve_ik(frame.T_world_cam @ T, seed_q=robot.home_q(),
+                             obstacle_ids=self.cell.obstacles,
+                             ignore_body_ids=[target] if target >= 0 else [])
+        robot.set_joints(robot.home_q())
+        return bool(res.ok)
 
     def _render(self) -> Frame:
         t0 = time.perf_counter()
@@ -193,9 +259,17 @@ class PickRunner:
         self.cell.step(self.dt)
         return q_next, clamped
 
+    def _stop_bodies(self) -> list[int]:
+        """What stops the robot on contact: the bin (a protective stop); also the boxes when
+        ``evaluate.stop_on_box_contact`` (otherwise the hand pushes them, under physics)."""
+        if bool(self.cfg.evaluate.stop_on_box_contact):
+            return self.cell.obstacles
+        return list(self.cell.cell_ids[1:])
+
     def _collides(self, q: np.ndarray, target: int) -> bool:
         ignore = [target] if target >= 0 else []
-        return bool(self.cell.robot.in_collision(None, self.cell.obstacles, ignore_body_ids=ignore))
+        return bool(self.cell.robot.in_collision(None, self._stop_bodies(),
+                                                 ignore_body_ids=ignore))
 
     def _place_joints(self) -> np.ndarray:
         """Joints of the conveyor pose (camera at ``motion.place_position`` looking down)."""
@@ -228,11 +302,11 @@ class PickRunner:
 
         cfg, cell, robot = self.cfg, self.cell, self.cell.robot
         intr: Intrinsics = cell.intrinsics
-        pattern = self._pattern(cand)
         u0, v0 = int(round(cand.u)), int(round(cand.v))
         target = int(frame.body_ids[v0, u0]) if (0 <= v0 < intr.height and 0 <= u0 < intr.width) \
             else -1
         target = target if target in cell.boxes else -1
+        pattern = self._pattern(cand, frame, target)
         att = Attempt(trial=trial, index=index, planner=self.name, pattern=pattern,
                       g_opt=[float(cand.u), float(cand.v)], target_body=target,
                       target_type=cell.boxes[target]["type"] if target >= 0 else "",
@@ -325,7 +399,7 @@ class PickRunner:
         for _ in range(steps):
             q, _ = self._move_twist(q, np.array([0.0, 0.0, v, 0.0, 0.0, 0.0]))
             att.motion_s += self.dt
-        hit = [c.other_body for c in robot.in_collision(None, cell.obstacles)
+        hit = [c.other_body for c in robot.in_collision(None, self._stop_bodies())
                if c.other_body != target and not c.robot_link.startswith("cup")]
         if hit:
             att.outcome = "collision"
@@ -395,7 +469,8 @@ class PickRunner:
             if not cands:
                 end = "no_grasp"
                 break
-            att = self.attempt(frame, cands[0], planning_s, trial, index, trace)
+            att = self.attempt(frame, self._first_reachable(frame, cands), planning_s, trial,
+                               index, trace)
             attempts.append(att)
             if att.outcome != "success":
                 failures[att.target_body] = failures.get(att.target_body, 0) + 1
