@@ -12,7 +12,8 @@ __version__ = "0.1.0"
 import os as _os
 
 # Rerun's SDK flushes its log batches every 200 ms by default, so how a .rrd file is split into
-# chunks depends on how busy the machine is, and `rerun rrd compare` (which `make repro-check`
-# uses) then reports different recordings. Flushing by size only (2 MiB) makes the chunking a
-# function of the logged data. Set RERUN_FLUSH_TICK_SECS yourself to override.
+# chunks depends on how busy the machine is. Flushing by size (2 MiB) makes that rarer, though
+# not impossible (the batcher runs on its own thread), so `make repro-check` compares recordings
+# row by row when `rerun rrd compare` (chunk by chunk) reports a difference. Set
+# RERUN_FLUSH_TICK_SECS yourself to override.
 _os.environ.setdefault("RERUN_FLUSH_TICK_SECS", "1000000000")
