@@ -6,13 +6,16 @@ PY := .venv/bin/python
 EXPERIMENT ?= default
 ARGS ?=
 STAGE ?= generate
+NPROC ?= 1
 RUN := $(PY) -m
+# NPROC > 1: data-parallel training, one process per CPU share or GPU (torchrun + DDP).
+TRAIN := $(if $(filter-out 1,$(NPROC)),.venv/bin/torchrun --standalone --nproc_per_node=$(NPROC) -m,$(RUN)) pipeline.train
 
 .PHONY: help setup test test-slow reproduce generate label train baseline evaluate report verify view bench repro-check lock clean
 
 help: ## List the targets
 	@grep -hE '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  make %-12s %s\n", $$1, $$2}'
-	@echo "  Variables: EXPERIMENT=smoke|default|paper (default: default), ARGS='hydra overrides', STAGE=<stage> (view)"
+	@echo "  Variables: EXPERIMENT=smoke|default|paper (default: default), ARGS='hydra overrides', STAGE=<stage> (view), NPROC=<n> (train)"
 
 setup: ## Create .venv with the pinned packages and check system libraries (quick if done)
 	@bash scripts/setup.sh
@@ -26,7 +29,7 @@ test-slow: setup ## Run the slow tests too
 reproduce: setup ## Run every stage with EXPERIMENT (default: default), then the report
 	$(RUN) pipeline.generate experiment=$(EXPERIMENT) $(ARGS)
 	$(RUN) pipeline.label experiment=$(EXPERIMENT) $(ARGS)
-	$(RUN) pipeline.train experiment=$(EXPERIMENT) $(ARGS)
+	$(TRAIN) experiment=$(EXPERIMENT) $(ARGS)
 	$(RUN) pipeline.baseline experiment=$(EXPERIMENT) $(ARGS)
 	$(RUN) pipeline.evaluate experiment=$(EXPERIMENT) $(ARGS)
 	$(RUN) pipeline.report experiment=$(EXPERIMENT) $(ARGS)
@@ -37,8 +40,8 @@ generate: setup ## Generation stage: depth images of box heaps (paper Sec. 4.3)
 label: setup ## Labelling stage: surfaces, hand- and robot-level grasp classes (Sec. 4.3)
 	$(RUN) pipeline.label experiment=$(EXPERIMENT) $(ARGS)
 
-train: setup ## Training stage: the DCNN grasp planner on the labels (Secs. 4.1, 4.2)
-	$(RUN) pipeline.train experiment=$(EXPERIMENT) $(ARGS)
+train: setup ## Training stage: the DCNN grasp planner on the labels (Secs. 4.1, 4.2); NPROC=2: torchrun
+	$(TRAIN) experiment=$(EXPERIMENT) $(ARGS)
 
 baseline: setup ## Dex-Net-style comparison: GQ-CNN + CEM suction planner and Table 2 (Sec. 8.1.1)
 	$(RUN) pipeline.baseline experiment=$(EXPERIMENT) $(ARGS)

@@ -48,7 +48,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from pipeline.artifacts import compute_version, load_manifest, resolve_artifact, run_stage, stage_config
 from pipeline.artifacts.store import ArtifactError, StageRun
-from pipeline.cli import CONF_DIR, data_root, default_workers, stage_main
+from pipeline.cli import CONF_DIR, data_root, stage_main
 from pipeline.dataset.scenes import SPLIT_CODES, SPLITS, Scene, SceneDataset
 from pipeline.dataset.storage import read_npz, write_npz
 from pipeline.dexnet.contact import REASONS, SuctionModelConfig, evaluate_contacts, robust_quality
@@ -57,7 +57,7 @@ from pipeline.dexnet.planner import (
     MODEL_FILE, DexNetPlanner, crop_config, gqcnn_config, sampler_config, workspace,
 )
 from pipeline.dexnet.sampling import Candidates, point_cloud_image, sample_candidates
-from pipeline.executor import map_shards
+from pipeline.executor import map_shards, resolve_workers
 from pipeline.labelling.surfaces import true_visible_faces
 from pipeline.planner.centre_distance import (
     PAPER_RADIUS_PX, PAPER_TABLE2, nearest_centre_distance, within_curve, within_rate,
@@ -481,7 +481,7 @@ def baseline(cfg: DictConfig) -> Path:
     config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
     version = compute_version(STAGE, config, upstream=upstream)
     cfg_obj = OmegaConf.to_object(cfg)
-    workers = default_workers(cfg_obj.baseline.workers)
+    workers = resolve_workers(cfg_obj.baseline.workers, cfg_obj.executor)
     progress = bool(cfg_obj.logging.progress)
 
     def body(run: StageRun) -> None:
@@ -494,7 +494,8 @@ def baseline(cfg: DictConfig) -> Path:
         t0 = time.perf_counter()
         summaries = list(map_shards(label_shard, tasks, init=_init_worker,
                                     initargs=(cfg_obj, str(gen_dir)), workers=workers,
-                                    desc=f"{STAGE} labels", progress=progress))
+                                    desc=f"{STAGE} labels", progress=progress,
+                                    executor=cfg_obj.executor))
         label_s = time.perf_counter() - t0
         n_scenes = sum(t.count for t in tasks)
         run.timings.update({"label_s": round(label_s, 3), "label_workers": workers,

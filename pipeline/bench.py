@@ -7,9 +7,15 @@ throughput with 1 and 2 workers on the generated scenes, and its split between s
 detection and robot checks. Planning time per image of the DCNN (default and paper widths)
 and of the Dex-Net-style planner (GQ-CNN and planarity), GQ-CNN training throughput. The
 closed loop: the surface descriptor's time per frame, the control loop's rate, simulated
-seconds per wall second and the wall time of a 3-box trial.
+seconds per wall second and the wall time of a 3-box trial. The executors (``executor=local|ray``,
+``--only executors``): overhead per trivial task, Ray's start-up, and generation + labelling
+throughput with 1 and 2 workers under each. Training memory (``--only training``): peak
+resident memory of loading an experiment's splits, reading one epoch of batches from disk and a
+few training steps of its network, against what the depth would take held in memory.
 
-    python -m pipeline.bench [--scenes 60] [--render-frames 30] [--only stages|planners|closed-loop]
+    python -m pipeline.bench [--scenes 60] [--render-frames 30]
+                             [--only stages|planners|closed-loop|executors|training]
+                             [--experiment paper] [--root <paths.root>]
 """
 
 from __future__ import annotations
@@ -125,16 +131,19 @@ def render_time_ms(frames: int, cfg) -> float:
 BENCH_SEED = 12345
 
 
-def stage_rates(num_scenes: int, root: str) -> dict[str, float]:
+def stage_rates(num_scenes: int, root: str, executors: tuple[str, ...] = ("local",)
+                ) -> dict[str, float]:
     """Scenes per second of ``pipeline.generate`` and ``pipeline.label`` with 1 and 2 workers
-    (simulation + storage; labelling = surfaces + hand + robot checks), from their manifests."""
+    (simulation + storage; labelling = surfaces + hand + robot checks), from their manifests.
+    Keys ``generate_2w_scenes_per_s`` (local executor), ``generate_ray_2w_scenes_per_s`` (ray:
+    run with Ray already started, so its start-up is not counted)."""
     from pipeline.artifacts.store import load_manifest
     from pipeline.cli import compose
     from pipeline.generate import generate
     from pipeline.label import label
 
-    def cfg(stage: str, workers: int, sub: str):
-        return compose(stage, [
+    def cfg(stage: str, workers: int, sub: str, executor: str = "local"):
+        return compose(stage, [f"executor={executor}",
             "experiment=smoke", f"paths.root={root}/{sub}", f"generate.num_scenes={num_scenes}",
             "generate.num_val_scenes=0", "generate.num_test_scenes=0",
             "generate.scenes_per_shard=10", f"generate.workers={workers}",
@@ -143,14 +152,83 @@ def stage_rates(num_scenes: int, root: str) -> dict[str, float]:
         ])
 
     out = {}
-    for workers in (1, 2):
-        gen = load_manifest(generate(cfg("generate", workers, f"w{workers}")))
-        out[f"generate_{workers}w_scenes_per_s"] = gen["timings"]["scenes_per_s"]
-        lab = load_manifest(label(cfg("label", workers, f"w{workers}")))
-        out[f"label_{workers}w_scenes_per_s"] = lab["timings"]["scenes_per_s"]
-        if workers == 1:
+    for executor, workers in [(e, w) for e in executors for w in (1, 2)]:
+        key = f"{workers}w" if executor == "local" else f"{executor}_{workers}w"
+        gen = load_manifest(generate(cfg("generate", workers, key, executor)))
+        out[f"generate_{key}_scenes_per_s"] = gen["timings"]["scenes_per_s"]
+        lab = load_manifest(label(cfg("label", workers, key, executor)))
+        out[f"label_{key}_scenes_per_s"] = lab["timings"]["scenes_per_s"]
+        if workers == 1 and executor == "local":
             out["label_surfaces_ms_per_scene"] = 1000 * lab["timings"]["surface_detection_s_per_scene"]
             out["label_robot_ms_per_scene"] = 1000 * lab["timings"]["robot_checks_s_per_scene"]
+    return out
+
+
+def _noop_init() -> None:
+    """Worker set-up of the executor overhead benchmark: nothing."""
+
+
+def _noop_task(x: int) -> int:
+    """The trivial task of the executor overhead benchmark."""
+    return x
+
+
+def executor_overhead(executor_cfg, workers: int, num_tasks: int = 200) -> tuple[float, float]:
+    """(seconds to the first result: worker start-up, ms per task after it) of ``map_shards``
+    running ``num_tasks`` trivial tasks on ``workers`` workers of ``executor_cfg``."""
+    from pipeline.executor import map_shards
+
+    t0 = time.perf_counter()
+    first = None
+    for _ in map_shards(_noop_task, list(range(num_tasks)), init=_noop_init, initargs=(),
+                        workers=workers, desc="overhead", progress=False, size=lambda t: 1,
+                        executor=executor_cfg):
+        first = first or time.perf_counter()
+    end = time.perf_counter()
+    return first - t0, 1000 * (end - first) / (num_tasks - 1)
+
+
+def executor_figures(num_scenes: int, num_tasks: int = 200) -> dict[str, float]:
+    """The executors: per trivial task overhead and worker start-up, local and Ray, 1 and 2
+    workers; Ray's start-up (a private 2-CPU instance); generation and labelling throughput with
+    1 and 2 workers under both (``stage_rates``)."""
+    from pipeline.config.schema import ExecutorConfig
+    from pipeline.executor import import_ray, start_ray
+
+    out: dict[str, float] = {}
+    local, ray_cfg = ExecutorConfig(name="local"), ExecutorConfig(name="ray", address=None)
+    for workers in (1, 2):
+        start, per_task = executor_overhead(local, workers, num_tasks)
+        out[f"local_{workers}w_ms_per_task"], out[f"local_{workers}w_start_s"] = per_task, start
+    with tempfile.TemporaryDirectory() as root:
+        out.update(stage_rates(num_scenes, root, ("local",)))
+        ray = import_ray()
+        t0 = time.perf_counter()
+        started = start_ray(ray_cfg, 2)
+        out["ray_startup_s"] = time.perf_counter() - t0
+        try:
+            for workers in (1, 2):
+                start, per_task = executor_overhead(ray_cfg, workers, num_tasks)
+                out[f"ray_{workers}w_ms_per_task"], out[f"ray_{workers}w_start_s"] = per_task, start
+            out.update(stage_rates(num_scenes, root, ("ray",)))
+        finally:
+            if started:
+                ray.shutdown()
+    print(f"executor overhead, {num_tasks} trivial tasks (ms per task after the first; "
+          "seconds to the first result):")
+    for ex in ("local", "ray"):
+        for workers in (1, 2):
+            print(f"  {ex + ',':<6} {workers} worker(s):                "
+                  f"{out[f'{ex}_{workers}w_ms_per_task']:.3f} ms/task, "
+                  f"{out[f'{ex}_{workers}w_start_s']:.2f} s start")
+    print(f"Ray start-up (private 2-CPU instance):  {out['ray_startup_s']:.2f} s "
+          "(once per stage run; not in the rates below)")
+    for stage, name in (("generate", "generation"), ("label", "labelling")):
+        for ex in ("local", "ray"):
+            for workers in (1, 2):
+                key = f"{workers}w" if ex == "local" else f"{ex}_{workers}w"
+                label = f"{name} stage, {ex}, {workers} worker(s):"
+                print(f"{label:<40}{out[f'{stage}_{key}_scenes_per_s']:.2f} scenes/s")
     return out
 
 
@@ -198,6 +276,96 @@ def planning_times(cfg, num_images: int = 8, repeats: int = 3) -> dict[str, floa
         print(f"planning, {name} network (width {full.model.width}, {label}): "
               f"{out[f'plan_{name}_ms']:.1f} ms/image, {np.mean(counts):.1f} candidates ranked")
     return out
+
+
+def _rss_mb() -> float:
+    """This process's resident memory now, MB (Linux ``/proc/self/status``)."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+def _training_memory_child(experiment: str, root: str | None, steps: int, loader_workers: int,
+                           width: float | None) -> dict:
+    """Runs in a fresh process (``training_memory``): the training stage's data path over
+    the experiment's latest label artifact, then ``steps`` optimisation steps of its network."""
+    import resource
+
+    import torch
+
+    from pipeline.artifacts import load_manifest, resolve_artifact
+    from pipeline.cli import compose, data_root
+    from pipeline.label import LabelSet
+    from pipeline.planner.data import GraspDataset, make_loader
+    from pipeline.planner.distributed import DistContext
+    from pipeline.planner.loss import LossConfig, grasp_loss
+    from pipeline.planner.network import GraspNet
+    from pipeline.train import _epoch_batches, network_config, normalisation
+
+    overrides = [f"experiment={experiment}"] + ([f"paths.root={root}"] if root else [])
+    overrides += [f"model.width={width}"] if width is not None else []
+    cfg = compose("train", overrides)
+    label_dir = resolve_artifact(data_root(cfg), "label", "latest")
+    gen_dir = resolve_artifact(data_root(cfg), "generate",
+                               load_manifest(label_dir)["upstream"]["generate"])
+    torch.set_num_threads(int(cfg.train.num_threads))
+    out = {"rss_start_mb": _rss_mb()}
+    net_cfg, norm = network_config(cfg), normalisation(cfg)
+    cache = data_root(cfg) / ".cache" / "depth" / gen_dir.name
+    t0 = time.perf_counter()
+    sets = {s: GraspDataset(gen_dir, LabelSet(label_dir, s), s, norm, net_cfg.grid, cfg.hand,
+                            cache_dir=cache) for s in ("train", "val", "test")}
+    out["load_s"] = time.perf_counter() - t0
+    out["rss_after_load_mb"] = _rss_mb()
+    train = sets["train"]
+    h, w = train.depth.shape
+    out["images"] = sum(len(d) for d in sets.values())
+    out["in_memory_depth_mb"] = out["images"] * h * w * 2 / 2**20
+    batch = int(cfg.train.batch_size)
+    batches, _ = _epoch_batches(len(train), batch, int(cfg.seed), 0, "none", DistContext())
+    t0 = time.perf_counter()
+    for x, _targets in make_loader(train, batches, loader_workers):
+        pass
+    out["epoch_decode_s"] = time.perf_counter() - t0
+    out["decode_images_per_s"] = len(train) / out["epoch_decode_s"]
+    out["rss_after_epoch_of_data_mb"] = _rss_mb()
+    torch.manual_seed(0)
+    net = GraspNet(net_cfg)
+    opt = torch.optim.Adam(net.parameters(), lr=1e-4)
+    loss_cfg = LossConfig(alpha=0.25, gamma=2.0, lambda_coord=1.0, lambda_class=1.0)
+    net.train()
+    t0 = time.perf_counter()
+    for x, targets in make_loader(train, batches[:steps], loader_workers):
+        loss = grasp_loss(net(x), targets, loss_cfg)["total"]
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+    out["train_images_per_s"] = steps * batch / (time.perf_counter() - t0)
+    out["width"] = net_cfg.width
+    out["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    out["peak_rss_loader_worker_mb"] = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+    return out
+
+
+def training_memory(experiment: str = "paper", root: str | None = None, steps: int = 4,
+                    loader_workers: int = 1, width: float | None = None) -> dict:
+    """Peak memory of training at an experiment's scale (its latest label artifact under
+    ``root``), measured in a fresh process: load the splits (label rows in memory, depth
+    streamed from the on-disk cache), read one epoch of training batches through the
+    DataLoader, then ``steps`` optimisation steps of the experiment's network (batch 16).
+    Also the size the depth of all splits would take in memory."""
+    import subprocess
+    import sys
+
+    code = ("import json, sys; from pipeline.bench import _training_memory_child; "
+            "print('RESULT ' + json.dumps(_training_memory_child(*json.loads(sys.argv[1]))))")
+    args = json.dumps([experiment, root, steps, loader_workers, width])
+    proc = subprocess.run([sys.executable, "-c", code, args], capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise RuntimeError(f"training memory benchmark failed:\n{proc.stderr[-2000:]}")
+    line = next(ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT "))
+    return json.loads(line[len("RESULT "):])
 
 
 def training_images_per_s(width: float, batch: int = 16, steps: int = 4) -> float:
@@ -348,13 +516,37 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", type=int, default=60, help="scenes per throughput run")
     parser.add_argument("--render-frames", type=int, default=30)
-    parser.add_argument("--only", choices=("all", "stages", "planners", "closed-loop"),
+    parser.add_argument("--only", choices=("all", "stages", "planners", "closed-loop", "executors",
+                                           "training"),
                         default="all", help="run one group of figures")
+    parser.add_argument("--experiment", default="paper",
+                        help="--only training: whose latest label artifact to load (paper)")
+    parser.add_argument("--root", default=None,
+                        help="--only training: paths.root holding that artifact (the repository)")
     args = parser.parse_args(argv)
     cfg = OmegaConf.to_object(compose("generate", ["experiment=smoke"]))
     os.environ.setdefault("LP_NUM_THREADS", "1")
 
     results = {}
+    if args.only == "training":
+        mem = training_memory(args.experiment, args.root)
+        print(f"training memory, `{args.experiment}` data ({mem['images']} images, "
+              f"network width {mem['width']}):")
+        print(f"  process at start (imports):          {mem['rss_start_mb']:.0f} MB")
+        print(f"  after loading the splits:            {mem['rss_after_load_mb']:.0f} MB "
+              f"({mem['load_s']:.1f} s; the depth in memory would take "
+              f"{mem['in_memory_depth_mb']:.0f} MB)")
+        print(f"  after one epoch of batches read:     {mem['rss_after_epoch_of_data_mb']:.0f} MB "
+              f"({mem['decode_images_per_s']:.0f} images/s decoded, 1 loader worker)")
+        print(f"  peak, with training steps (batch 16): {mem['peak_rss_mb']:.0f} MB "
+              f"(loader worker peak {mem['peak_rss_loader_worker_mb']:.0f} MB; "
+              f"{mem['train_images_per_s']:.2f} images/s)")
+        print(json.dumps({k: round(v, 3) if isinstance(v, float) else v for k, v in mem.items()}))
+        return 0
+    if args.only == "executors":
+        results.update(executor_figures(args.scenes))
+        print(json.dumps({k: round(v, 3) for k, v in results.items()}))
+        return 0
     if args.only in ("planners", "closed-loop"):
         if args.only == "planners":
             results.update(planning_times(cfg))

@@ -40,8 +40,8 @@ from omegaconf import DictConfig, OmegaConf
 
 from pipeline.artifacts import compute_version, resolve_artifact, run_stage, stage_config
 from pipeline.artifacts.store import StageRun
-from pipeline.cli import CONF_DIR, data_root, default_workers, stage_main
-from pipeline.executor import map_shards
+from pipeline.cli import CONF_DIR, data_root, stage_main
+from pipeline.executor import map_shards, resolve_workers
 from pipeline.picking.trial import OUTCOMES, TRIAL_ENDS, PickRunner, TrialResult
 from pipeline.tracking import StageLog
 
@@ -253,7 +253,7 @@ def evaluate(cfg: DictConfig) -> Path:
     config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
     version = compute_version(STAGE, config, upstream)
     cfg_obj = OmegaConf.to_object(cfg)
-    workers = default_workers(cfg_obj.evaluate.workers)
+    workers = resolve_workers(cfg_obj.evaluate.workers, cfg_obj.executor)
 
     def body(run: StageRun) -> None:
         tasks = [TrialTask(name, t) for name in planners
@@ -263,7 +263,8 @@ def evaluate(cfg: DictConfig) -> Path:
                               initargs=(cfg_obj, str(train_dir) if train_dir else None,
                                         str(baseline_dir) if baseline_dir else None),
                               workers=min(workers, len(tasks)), desc=STAGE,
-                              progress=bool(cfg_obj.logging.progress)))
+                              progress=bool(cfg_obj.logging.progress),
+                              executor=cfg_obj.executor))
         wall = time.perf_counter() - t0
         results = [r for r, _ in out]
         trials = [{"planner": r.planner, "trial": r.trial, "boxes": r.boxes, "picked": r.picked,

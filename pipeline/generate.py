@@ -28,10 +28,10 @@ from pipeline.artifacts.store import StageRun
 from pipeline.camera.geometry import (
     Intrinsics, camera_pose_above_bin, pose_matrix, quat_from_matrix,
 )
-from pipeline.cli import CONF_DIR, data_root, default_workers, stage_main
+from pipeline.cli import CONF_DIR, data_root, stage_main
 from pipeline.dataset.scenes import SPLIT_CODES, SPLITS, SceneDataset
 from pipeline.dataset.storage import write_npz
-from pipeline.executor import log_quota, map_shards
+from pipeline.executor import log_quota, map_shards, resolve_workers
 from pipeline.simulation.scene import connect, scene_rng, simulate_scene
 from pipeline.tracking import StageLog, default_blueprint
 
@@ -149,7 +149,8 @@ def generate_shard(task: ShardTask) -> ShardSummary:
 def run_shards(tasks: list[ShardTask], cfg_obj, workers: int, progress: bool = True):
     """Yield each shard's summary in task order, computed by ``workers`` processes."""
     return map_shards(generate_shard, tasks, init=_init_worker, initargs=(cfg_obj,),
-                      workers=workers, desc=STAGE, progress=progress)
+                      workers=workers, desc=STAGE, progress=progress,
+                      executor=cfg_obj.executor)
 
 
 def _log_static(log: StageLog, cfg_obj) -> None:
@@ -211,7 +212,7 @@ def generate(cfg: DictConfig) -> Path:
     sizes = split_sizes(cfg_obj.generate)
     if not cfg_obj.boxes.types:
         raise ValueError("boxes.types is empty: the box set needs at least one box type")
-    workers = default_workers(cfg_obj.generate.workers)
+    workers = resolve_workers(cfg_obj.generate.workers, cfg_obj.executor)
 
     def body(run: StageRun) -> None:
         intr = Intrinsics.from_config(cfg_obj.camera)

@@ -37,10 +37,10 @@ from omegaconf import DictConfig, OmegaConf
 from pipeline.artifacts import compute_version, resolve_artifact, run_stage, stage_config
 from pipeline.artifacts.store import StageRun
 from pipeline.camera.geometry import quat_from_matrix
-from pipeline.cli import CONF_DIR, data_root, default_workers, stage_main
+from pipeline.cli import CONF_DIR, data_root, stage_main
 from pipeline.dataset.scenes import SPLITS, Scene, SceneDataset
 from pipeline.dataset.storage import read_npz, write_npz
-from pipeline.executor import log_quota, map_shards
+from pipeline.executor import log_quota, map_shards, resolve_workers
 from pipeline.labelling.hand import hand_label
 from pipeline.labelling.surfaces import (
     SurfaceDetectionConfig, aggregate, detect_surfaces, match_surfaces, true_visible_faces,
@@ -212,7 +212,7 @@ def plan_tasks(gen_dir: Path, out_dir: Path) -> list[LabelTask]:
 def run_tasks(tasks, cfg_obj, gen_dir: Path, workers: int, progress: bool):
     """Yield each shard's summary in task order, computed by ``workers`` processes."""
     return map_shards(label_shard, tasks, init=_init_worker, initargs=(cfg_obj, str(gen_dir)),
-                      workers=workers, desc=STAGE, progress=progress)
+                      workers=workers, desc=STAGE, progress=progress, executor=cfg_obj.executor)
 
 
 class LabelSet:
@@ -305,7 +305,7 @@ def label(cfg: DictConfig) -> Path:
     config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
     version = compute_version(STAGE, config, upstream={"generate": gen_dir.name})
     cfg_obj = OmegaConf.to_object(cfg)
-    workers = default_workers(cfg_obj.label.workers)
+    workers = resolve_workers(cfg_obj.label.workers, cfg_obj.executor)
 
     def body(run: StageRun) -> None:
         tasks = plan_tasks(gen_dir, run.work_dir)

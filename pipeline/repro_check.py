@@ -74,31 +74,37 @@ def run_pipeline(root: Path, extra: list[str]) -> None:
         subprocess.run(cmd, check=True)
 
 
+def compare_artifacts(stage: str, a: Path, b: Path) -> list[str]:
+    """Differences between two artifact folders of a stage (empty when identical): version,
+    file list, sha256 of every file, Rerun logs by content; volatile files skipped."""
+    if a.name != b.name:
+        return [f"{stage}: versions differ ({a.name} vs {b.name})"]
+    diffs = []
+    ma, mb = load_manifest(a), load_manifest(b)
+    fa, fb = ma["files"], mb["files"]
+    volatile = set((ma.get("metrics") or {}).get("volatile_files") or [])
+    for rel in sorted(set(fa) | set(fb)):
+        if rel in volatile and rel in fa and rel in fb:
+            print(f"[repro-check] {stage}/{rel}: skipped (wall-clock timings)")
+        elif rel not in fa or rel not in fb:
+            diffs.append(f"{stage}/{rel}: present in only one run")
+        elif rel.endswith(".rrd"):
+            if not rrd_equal(a / rel, b / rel) and not rrd_rows_equal(a / rel, b / rel):
+                diffs.append(f"{stage}/{rel}: Rerun recordings differ (rerun rrd compare: "
+                             f"{_rrd_compare_output(a / rel, b / rel)})")
+        elif fa[rel]["sha256"] != fb[rel]["sha256"]:
+            diffs.append(f"{stage}/{rel}: sha256 differs")
+    print(f"[repro-check] {stage} {a.name}: {len(fa)} files compared")
+    return diffs
+
+
 def compare(root_a: Path, root_b: Path) -> list[str]:
     """Differences between the two runs' artifacts (empty when identical)."""
     diffs = []
     for stage in STAGES:
         top = "models" if stage in MODEL_STAGES else "data"
-        a = resolve_artifact(root_a / top, stage)
-        b = resolve_artifact(root_b / top, stage)
-        if a.name != b.name:
-            diffs.append(f"{stage}: versions differ ({a.name} vs {b.name})")
-            continue
-        ma, mb = load_manifest(a), load_manifest(b)
-        fa, fb = ma["files"], mb["files"]
-        volatile = set((ma.get("metrics") or {}).get("volatile_files") or [])
-        for rel in sorted(set(fa) | set(fb)):
-            if rel in volatile and rel in fa and rel in fb:
-                print(f"[repro-check] {stage}/{rel}: skipped (wall-clock timings)")
-            elif rel not in fa or rel not in fb:
-                diffs.append(f"{stage}/{rel}: present in only one run")
-            elif rel.endswith(".rrd"):
-                if not rrd_equal(a / rel, b / rel) and not rrd_rows_equal(a / rel, b / rel):
-                    diffs.append(f"{stage}/{rel}: Rerun recordings differ (rerun rrd compare: "
-                                 f"{_rrd_compare_output(a / rel, b / rel)})")
-            elif fa[rel]["sha256"] != fb[rel]["sha256"]:
-                diffs.append(f"{stage}/{rel}: sha256 differs")
-        print(f"[repro-check] {stage} {a.name}: {len(fa)} files compared")
+        diffs += compare_artifacts(stage, resolve_artifact(root_a / top, stage),
+                                   resolve_artifact(root_b / top, stage))
     return diffs
 
 

@@ -24,6 +24,15 @@ of epoch e come from a generator seeded by (seed, e); CPU threads are fixed
 same config write byte-identical ``model.pt``. On CUDA, max-pool backward has no deterministic
 kernel, so GPU runs are repeatable only approximately (the device is part of the version).
 
+Data: depth streams from disk (``pipeline.planner.data.DepthShards``: the generation shards,
+decompressed once into ``<data>/.cache/depth/<generate version>/``) through a DataLoader with
+``train.loader_workers`` decoding processes; only the label rows are held in memory, so the
+``paper`` scale trains in the memory of the ``smoke`` one. The loader does not change the result.
+
+Several processes: ``torchrun --nproc_per_node=N -m pipeline.train`` (``make train NPROC=N``)
+trains data-parallel (``pipeline.planner.distributed``): the same global batches split across
+the processes; ``world_size`` enters the version because the result differs slightly.
+
 Resuming: after every epoch the checkpoint is written to ``models/train/.resume-<key>/``, key =
 the version without ``train.epochs``; a run that finds it continues from its epoch, so a killed
 run loses at most one epoch and ``train.epochs=<more>`` extends a finished run. Because the
@@ -55,7 +64,9 @@ from pipeline.cli import CONF_DIR, data_root, stage_main
 from pipeline.label import CLASS_COLORS, LabelSet
 from pipeline.labelling.types import GraspClass
 from pipeline.planner.augment import FLIPS
-from pipeline.planner.data import GraspDataset, Normalisation
+from pipeline.planner import distributed
+from pipeline.planner.data import GraspDataset, Normalisation, make_loader
+from pipeline.planner.distributed import DistContext
 from pipeline.planner.decode import decode_output
 from pipeline.planner.evaluate import ImagePredictions, downsample_curve, precision_table
 from pipeline.planner.loss import LossConfig, grasp_loss
@@ -65,7 +76,8 @@ from pipeline.tracking import StageLog
 
 STAGE = "train"
 SECTIONS = ("seed", "model", "train", "camera", "bin", "hand")
-NOT_AFFECTING_RESULT = ("train.label_version", "train.force", "train.device", "train.log_samples")
+NOT_AFFECTING_RESULT = ("train.label_version", "train.force", "train.device", "train.log_samples",
+                        "train.loader_workers")
 CHECKPOINT = "checkpoint.pt"
 RESUME_PREFIX = ".resume-"
 EVAL_BATCH = 16
@@ -189,8 +201,40 @@ def _log_samples(log: StageLog, planner: Planner, data: GraspDataset, count: int
         log.log_text("log", f"test image {k}: {len(cands)} candidates; {best}")
 
 
-def train(cfg: DictConfig) -> Path:
-    """Train the DCNN on a label artifact; returns the training artifact folder."""
+def _epoch_batches(n: int, batch: int, seed: int, epoch: int, flip: str,
+                   ctx: DistContext) -> tuple[list[list[tuple[int, str]]], list[float]]:
+    """Epoch ``epoch``'s batches for this rank, as (index, flip) lists, and their loss weights
+    (``distributed.split_batch``; one process: the whole batches, weight 1)."""
+    order, flips = epoch_order(n, seed, epoch, flip)
+    batches, weights = [], []
+    for start in range(0, n, batch):
+        idx, fl, w = distributed.split_batch(order[start:start + batch],
+                                             flips[start:start + batch], ctx.rank, ctx.world_size)
+        batches.append(list(zip(idx, fl)))
+        weights.append(w)
+    return batches, weights
+
+
+def _load_resume(ckpt_path: Path, net, opt, epochs: int) -> tuple[dict | None, int]:
+    """(history, epoch) of a resumable checkpoint, loaded into ``net`` and ``opt``; else (None, 0)."""
+    if not ckpt_path.is_file():
+        return None, 0
+    ckpt = torch.load(ckpt_path, map_location="cpu", weights_only=True)
+    if ckpt["epoch"] > epochs:
+        return None, 0
+    net.load_state_dict(ckpt["model"])
+    opt.load_state_dict(ckpt["optimizer"])
+    return ckpt["history"], int(ckpt["epoch"])
+
+
+def train(cfg: DictConfig) -> Path | None:
+    """Train the DCNN on a label artifact; returns the training artifact folder.
+
+    Under ``torchrun`` (``pipeline.planner.distributed``) every rank trains on its part of each
+    batch; rank 0 alone validates, checkpoints and writes the artifact, and the other ranks
+    return None.
+    """
+    ctx = distributed.from_env()
     label_dir = resolve_artifact(data_root(cfg), "label", cfg.train.label_version)
     gen_version = load_manifest(label_dir)["upstream"]["generate"]
     gen_dir = resolve_artifact(data_root(cfg), "generate", gen_version)
@@ -199,145 +243,203 @@ def train(cfg: DictConfig) -> Path:
     device = pick_device(cfg.train.device)
     config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
     config["train"]["device_type"] = device.type
+    if ctx.active:  # data-parallel results differ slightly from one process's (see distributed)
+        config["train"]["world_size"] = ctx.world_size
     upstream = {"label": label_dir.name, "generate": gen_dir.name}
     version = compute_version(STAGE, config, upstream)
     resume_config = copy.deepcopy(config)
     resume_config["train"].pop("epochs")
     resume_dir = Path(cfg.paths.models) / STAGE / (RESUME_PREFIX + compute_version(
         STAGE + "-resume", resume_config, upstream, code_of=STAGE))
+    ckpt_path = resume_dir / CHECKPOINT
+    cache_dir = data_root(cfg) / ".cache" / "depth" / gen_dir.name
     seed, tc = int(cfg.seed), cfg.train
-    progress = bool(cfg.logging.progress)
+    progress = bool(cfg.logging.progress) and ctx.is_main
+    net_cfg, norm = network_config(cfg), normalisation(cfg)
+    loss_cfg = LossConfig(alpha=float(tc.alpha), gamma=float(tc.gamma),
+                          lambda_coord=float(tc.lambda_coord),
+                          lambda_class=float(tc.lambda_class))
+    batch = int(tc.batch_size)
+    if batch < ctx.world_size:
+        raise ValueError(f"train.batch_size={batch} is smaller than the {ctx.world_size} "
+                         "processes: each needs at least one image of every batch")
 
-    def body(run: StageRun) -> None:
+    def dataset(split: str) -> GraspDataset:
+        return GraspDataset(gen_dir, LabelSet(label_dir, split), split, norm, net_cfg.grid,
+                            cfg.hand, int(tc.max_train_images) if split == "train" else 0,
+                            cache_dir=cache_dir)
+
+    def setup():
+        """Deterministic torch state, the network and Adam: the same on every rank."""
         if device.type == "cuda":
             os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
         torch.use_deterministic_algorithms(True, warn_only=device.type == "cuda")
-        torch.set_num_threads(int(tc.num_threads))
+        torch.set_num_threads(max(1, int(tc.num_threads) // ctx.local_world_size))
         torch.manual_seed(seed)
-        net_cfg = network_config(cfg)
-        norm = normalisation(cfg)
-        t0 = time.perf_counter()
-        sets = {split: GraspDataset(gen_dir, LabelSet(label_dir, split), split, norm,
-                                    net_cfg.grid, cfg.hand,
-                                    int(tc.max_train_images) if split == "train" else 0)
-                for split in ("train", "val", "test")}
-        run.timings["load_s"] = round(time.perf_counter() - t0, 3)
-        train_set = sets["train"]
-        if len(train_set) == 0:
-            raise ValueError("the label artifact has no training images")
-        net = GraspNet(net_cfg).to(device)
+        net = GraspNet(net_cfg).to(run_device)
         opt = torch.optim.Adam(net.parameters(), lr=float(tc.lr),
                                betas=tuple(float(b) for b in tc.betas))
-        loss_cfg = LossConfig(alpha=float(tc.alpha), gamma=float(tc.gamma),
-                              lambda_coord=float(tc.lambda_coord),
-                              lambda_class=float(tc.lambda_class))
-        history = {k: [] for k in ("train_loss", "val_loss", "step_total", "step_coord",
-                                   "step_class")}
-        start_epoch = 0
-        ckpt_path = resume_dir / CHECKPOINT
-        if ckpt_path.is_file():
-            ckpt = torch.load(ckpt_path, map_location="cpu", weights_only=True)
-            if ckpt["epoch"] <= int(tc.epochs):
-                net.load_state_dict(ckpt["model"])
-                opt.load_state_dict(ckpt["optimizer"])
-                history, start_epoch = ckpt["history"], int(ckpt["epoch"])
-                print(f"train: resuming from {ckpt_path} at epoch {start_epoch}")
-        batch = int(tc.batch_size)
-        steps_per_epoch = math.ceil(len(train_set) / batch)
+        return net, opt
+
+    def fit(net, opt, train_set: GraspDataset, history: dict, start_epoch: int,
+            end_of_epoch) -> tuple[int, float]:
+        """Epochs ``start_epoch..epochs-1``; ``end_of_epoch(epoch)`` after each (rank 0)."""
+        model = net
+        if ctx.active:
+            if run_device.type == "cuda":
+                model = torch.nn.SyncBatchNorm.convert_sync_batchnorm(model)
+            model = torch.nn.parallel.DistributedDataParallel(
+                model, device_ids=[run_device.index] if run_device.type == "cuda" else None)
         images_done, train_s = 0, 0.0
+        n = len(train_set)
         for epoch in range(start_epoch, int(tc.epochs)):
-            order, flips = epoch_order(len(train_set), seed, epoch, tc.augment_flip)
-            net.train()
+            batches, weights = _epoch_batches(n, batch, seed, epoch, tc.augment_flip, ctx)
+            loader = make_loader(train_set, batches, int(tc.loader_workers))
+            model.train()
             t_epoch = time.perf_counter()
             running = 0.0
-            bar = tqdm(range(steps_per_epoch), desc=f"train epoch {epoch + 1}/{tc.epochs}",
-                       unit="batch", disable=not progress)
-            for s in bar:
-                idx = order[s * batch:(s + 1) * batch]
-                x, targets = train_set.batch(idx, [flips[i] for i in range(s * batch, s * batch + len(idx))])
-                loss = grasp_loss(net(x.to(device)), targets, loss_cfg)
+            bar = tqdm(zip(loader, weights), total=len(batches), unit="batch",
+                       desc=f"train epoch {epoch + 1}/{tc.epochs}", disable=not progress)
+            for s, ((x, targets), weight) in enumerate(bar):
+                loss = grasp_loss(model(x.to(run_device)), targets, loss_cfg)
                 if not torch.isfinite(loss["total"]):
                     raise FloatingPointError(f"loss is {float(loss['total'])} at epoch {epoch + 1}"
                                              f" step {s}; lower train.lr or check the labels")
                 opt.zero_grad(set_to_none=True)
-                loss["total"].backward()
+                (loss["total"] * weight if ctx.active else loss["total"]).backward()
                 opt.step()
-                values = [float(loss[k].detach()) for k in ("total", "coord", "class")]
+                values = distributed.all_mean(
+                    ctx, [float(loss[k].detach()) for k in ("total", "coord", "class")], weight,
+                    run_device)
                 for key, v in zip(("step_total", "step_coord", "step_class"), values):
                     history[key].append(v)
-                running += values[0] * len(idx)
+                running += values[0] * min(batch, n - s * batch)
                 bar.set_postfix(loss=f"{values[0]:.4f}")
             bar.close()
             train_s += time.perf_counter() - t_epoch
-            images_done += len(train_set)
-            history["train_loss"].append(running / len(train_set))
-            history["val_loss"].append(evaluate_loss(net, sets["val"], loss_cfg, device))
-            _save_atomic({"model": _cpu_state(net), "optimizer": _cpu_state(opt),
-                          # Without paths and logging: where a run writes and how it logs do
-                          # not change the model, and the file must not depend on them.
-                          "config": {k: v for k, v in OmegaConf.to_container(cfg, resolve=True)
-                                     .items() if k not in ("paths", "logging")},
-                          "epoch": epoch + 1, "history": history,
-                          "metrics": {"train_loss": history["train_loss"][-1],
-                                      "val_loss": history["val_loss"][-1]}}, ckpt_path)
-            print(f"train: epoch {epoch + 1}/{tc.epochs} train loss "
-                  f"{history['train_loss'][-1]:.4f} val loss {history['val_loss'][-1]:.4f}")
+            images_done += n
+            history["train_loss"].append(running / n)
+            end_of_epoch(epoch)
+        return images_done, train_s
 
-        ranking = ranking_config(cfg)
-        model_blob = {"state_dict": _cpu_state(net), "network": dataclasses.asdict(net_cfg),
-                      "normalisation": norm.as_dict(), "ranking": dataclasses.asdict(ranking),
-                      "classes": [c.name for c in GraspClass]}
-        torch.save(model_blob, run.work_dir / MODEL_FILE)
-        if ckpt_path.is_file():
-            (run.work_dir / CHECKPOINT).write_bytes(ckpt_path.read_bytes())
-        planner = Planner(net, norm, ranking, device)
+    run_device = distributed.init(ctx, device)
+    try:
+        if not ctx.is_main:
+            start_epoch = distributed.broadcast(ctx, None)
+            if start_epoch is None:  # rank 0 found the artifact or failed before training
+                return None
+            net, opt = setup()
+            history, _ = _load_resume(ckpt_path, net, opt, int(tc.epochs)) if start_epoch else (None, 0)
+            distributed.barrier(ctx)  # rank 0 has built the depth cache
+            fit(net, opt, dataset("train"), history or _new_history(), start_epoch,
+                lambda epoch: None)
+            return None
 
-        t1 = time.perf_counter()
-        result = table1(planner, sets["test"], float(tc.match_radius_px))
-        run.timings["test_eval_s"] = round(time.perf_counter() - t1, 3)
-        curve = result.pop("pr_curve")
-        with open(run.work_dir / "pr_curve.csv", "w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(["rank", "score", "precision", "recall"])
-            for r, (sc, p, rc) in enumerate(zip(curve["score"], curve["precision"],
-                                                curve["recall"]), 1):
-                w.writerow([r, f"{sc:.6f}", f"{p:.6f}", f"{rc:.6f}"])
+        started = False
 
-        lost, total = sum(d.lost_points for d in sets.values()), sum(d.total_points for d in sets.values())
-        run.metrics.update({
-            "network": {"width": net_cfg.width, "parameters": count_parameters(net),
-                        "macs_per_image": count_flops(net),
-                        "gmacs_per_image": round(count_flops(net) / 1e9, 4)},
-            "images": {s: len(d) for s, d in sets.items()},
-            "one_point_per_cell": {
-                "lost_points": int(lost), "total_points": int(total),
-                "lost_fraction": round(lost / max(total, 1), 6),
-                "per_split": {s: {"lost": d.lost_points, "total": d.total_points}
-                              for s, d in sets.items()}},
-            "epochs": int(tc.epochs),
-            "train_loss_per_epoch": [round(v, 6) for v in history["train_loss"]],
-            "val_loss_per_epoch": [round(v, 6) if math.isfinite(v) else None
-                                   for v in history["val_loss"]],
-            "table1": result,
-            "table1_definition": "see pipeline/planner/evaluate.py (module docstring)",
-            "pr_curve": downsample_curve(curve),
-            "device": device.type,
-        })
-        run.timings.update({
-            "train_s": round(train_s, 3), "epochs_run_here": int(tc.epochs) - start_epoch,
-            "train_images_per_s": round(images_done / train_s, 3) if train_s else None})
+        def body(run: StageRun) -> None:
+            nonlocal started
+            net, opt = setup()
+            history, start_epoch = _load_resume(ckpt_path, net, opt, int(tc.epochs))
+            history = history or _new_history()
+            if start_epoch:
+                print(f"train: resuming from {ckpt_path} at epoch {start_epoch}")
+            started = True
+            distributed.broadcast(ctx, start_epoch)
+            t0 = time.perf_counter()
+            sets = {split: dataset(split) for split in ("train", "val", "test")}
+            run.timings["load_s"] = round(time.perf_counter() - t0, 3)
+            distributed.barrier(ctx)
+            train_set = sets["train"]
+            if len(train_set) == 0:
+                raise ValueError("the label artifact has no training images")
 
-        with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version) as log:
-            _log_history(log, history, steps_per_epoch)
-            end_ns = (len(history["step_total"]) + 1) * 1_000_000
-            log.set_time(sequences={"epoch": int(tc.epochs)}, clock_ns=end_ns)
-            for key in ("top1", "top1pct", "top5pct", "top10pct"):
-                if result[key] is not None:
-                    log.log_scalar(f"test/table1/{key}", result[key])
-            _log_samples(log, planner, sets["test"], int(tc.log_samples), end_ns + 1_000_000_000)
+            def end_of_epoch(epoch: int) -> None:
+                history["val_loss"].append(evaluate_loss(net, sets["val"], loss_cfg, run_device))
+                _save_atomic({"model": _cpu_state(net), "optimizer": _cpu_state(opt),
+                              # Without paths and logging: where a run writes and how it logs
+                              # do not change the model, and the file must not depend on them.
+                              "config": {k: v for k, v in OmegaConf.to_container(cfg, resolve=True)
+                                         .items() if k not in ("paths", "logging")},
+                              "epoch": epoch + 1, "history": history,
+                              "metrics": {"train_loss": history["train_loss"][-1],
+                                          "val_loss": history["val_loss"][-1]}}, ckpt_path)
+                print(f"train: epoch {epoch + 1}/{tc.epochs} train loss "
+                      f"{history['train_loss'][-1]:.4f} val loss {history['val_loss'][-1]:.4f}")
 
-    return run_stage(Path(cfg.paths.models), STAGE, version, config, upstream, body,
-                     seed=seed, force=bool(tc.force))
+            images_done, train_s = fit(net, opt, train_set, history, start_epoch, end_of_epoch)
+            _finish(run, net, sets, history, images_done, train_s, start_epoch)
+
+        def _finish(run: StageRun, net, sets, history, images_done, train_s, start_epoch) -> None:
+            steps_per_epoch = math.ceil(len(sets["train"]) / batch)
+            ranking = ranking_config(cfg)
+            model_blob = {"state_dict": _cpu_state(net), "network": dataclasses.asdict(net_cfg),
+                          "normalisation": norm.as_dict(), "ranking": dataclasses.asdict(ranking),
+                          "classes": [c.name for c in GraspClass]}
+            torch.save(model_blob, run.work_dir / MODEL_FILE)
+            if ckpt_path.is_file():
+                (run.work_dir / CHECKPOINT).write_bytes(ckpt_path.read_bytes())
+            planner = Planner(net, norm, ranking, run_device)
+
+            t1 = time.perf_counter()
+            result = table1(planner, sets["test"], float(tc.match_radius_px))
+            run.timings["test_eval_s"] = round(time.perf_counter() - t1, 3)
+            curve = result.pop("pr_curve")
+            with open(run.work_dir / "pr_curve.csv", "w", newline="") as f:
+                w = csv.writer(f)
+                w.writerow(["rank", "score", "precision", "recall"])
+                for r, (sc, p, rc) in enumerate(zip(curve["score"], curve["precision"],
+                                                    curve["recall"]), 1):
+                    w.writerow([r, f"{sc:.6f}", f"{p:.6f}", f"{rc:.6f}"])
+
+            lost = sum(d.lost_points for d in sets.values())
+            total = sum(d.total_points for d in sets.values())
+            run.metrics.update({
+                "network": {"width": net_cfg.width, "parameters": count_parameters(net),
+                            "macs_per_image": count_flops(net),
+                            "gmacs_per_image": round(count_flops(net) / 1e9, 4)},
+                "images": {s: len(d) for s, d in sets.items()},
+                "one_point_per_cell": {
+                    "lost_points": int(lost), "total_points": int(total),
+                    "lost_fraction": round(lost / max(total, 1), 6),
+                    "per_split": {s: {"lost": d.lost_points, "total": d.total_points}
+                                  for s, d in sets.items()}},
+                "epochs": int(tc.epochs),
+                "train_loss_per_epoch": [round(v, 6) for v in history["train_loss"]],
+                "val_loss_per_epoch": [round(v, 6) if math.isfinite(v) else None
+                                       for v in history["val_loss"]],
+                "table1": result,
+                "table1_definition": "see pipeline/planner/evaluate.py (module docstring)",
+                "pr_curve": downsample_curve(curve),
+                "device": device.type,
+            })
+            run.timings.update({
+                "train_s": round(train_s, 3), "epochs_run_here": int(tc.epochs) - start_epoch,
+                "processes": ctx.world_size, "loader_workers": int(tc.loader_workers),
+                "train_images_per_s": round(images_done / train_s, 3) if train_s else None})
+
+            with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version) as log:
+                _log_history(log, history, steps_per_epoch)
+                end_ns = (len(history["step_total"]) + 1) * 1_000_000
+                log.set_time(sequences={"epoch": int(tc.epochs)}, clock_ns=end_ns)
+                for key in ("top1", "top1pct", "top5pct", "top10pct"):
+                    if result[key] is not None:
+                        log.log_scalar(f"test/table1/{key}", result[key])
+                _log_samples(log, planner, sets["test"], int(tc.log_samples),
+                             end_ns + 1_000_000_000)
+
+        try:
+            return run_stage(Path(cfg.paths.models), STAGE, version, config, upstream, body,
+                             seed=seed, force=bool(tc.force))
+        finally:
+            if not started:
+                distributed.broadcast(ctx, None)
+    finally:
+        distributed.shutdown(ctx)
+
+
+def _new_history() -> dict:
+    return {k: [] for k in ("train_loss", "val_loss", "step_total", "step_coord", "step_class")}
 
 
 @hydra.main(config_path=CONF_DIR, config_name="train", version_base="1.3")

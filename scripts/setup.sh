@@ -41,7 +41,7 @@ echo "[setup] installing pinned packages into $VENV (first time: a few minutes, 
 quiet_pip() { $VENV/bin/python -m pip --disable-pip-version-check "$@" 2> >(grep -v 'WARNING: Location' >&2); }
 quiet_pip install --quiet -r requirements.lock
 quiet_pip install --quiet --no-deps --no-build-isolation -e .
-$VENV/bin/python -c "import pybullet, torch, open3d, cv2, rerun, mcap, foxglove, hydra" \
+$VENV/bin/python -c "import pybullet, torch, open3d, cv2, rerun, mcap, foxglove, hydra, ray" \
   || { echo "[setup] ERROR: the environment was installed but an import failed (see above)." >&2; exit 1; }
 $VENV/bin/rerun analytics disable >/dev/null 2>&1 || true
 echo "$want" > "$STAMP"

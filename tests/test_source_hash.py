@@ -21,3 +21,34 @@ def test_stage_hashes_differ_and_are_stable():
     assert len(set(hashes.values())) == len(hashes)
     assert source_hash("generate") == hashes["generate"]
     assert source_hash() not in hashes.values()  # the whole package
+
+
+def test_executor_is_plumbing(tmp_path, monkeypatch):
+    """Where shards run (pipeline.executor) does not change a result: not in the source hash."""
+    import shutil
+
+    from pipeline.artifacts import fingerprint
+
+    root = tmp_path / "pipeline"
+    shutil.copytree(fingerprint.PACKAGE_ROOT, root,
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    monkeypatch.setattr(fingerprint, "PACKAGE_ROOT", root)
+
+    def hashes():
+        fingerprint.import_closure.cache_clear()
+        fingerprint.source_hash.cache_clear()
+        return {s: source_hash(s) for s in ("generate", "label")}
+
+    try:
+        assert "pipeline.executor" in import_closure("pipeline.generate")
+        before = hashes()
+        with open(root / "executor.py", "a") as f:
+            f.write("\n# an edit\n")
+        assert hashes() == before
+        with open(root / "generate.py", "a") as f:
+            f.write("\n# an edit\n")
+        assert hashes()["generate"] != before["generate"]
+    finally:
+        monkeypatch.undo()
+        fingerprint.import_closure.cache_clear()
+        fingerprint.source_hash.cache_clear()

@@ -40,8 +40,9 @@ def sha256_file(path: Path, chunk: int = 1 << 20) -> str:
 
 
 # Plumbing that cannot change a stage's numbers: the resolved config is hashed itself (so the
-# schema and the CLI need not be), and the artifact code writes manifests, not results.
-PLUMBING = ("pipeline.cli", "pipeline.config", "pipeline.artifacts")
+# schema and the CLI need not be), the artifact code writes manifests, not results, and the
+# executor only decides where shards run (same artifact locally and on Ray: test_executor.py).
+PLUMBING = ("pipeline.cli", "pipeline.config", "pipeline.artifacts", "pipeline.executor")
 
 
 def _module_path(name: str) -> Path | None:

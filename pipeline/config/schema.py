@@ -221,7 +221,8 @@ class TrainConfig:
     max_train_images: int = 0  # 0 = the whole train split
     threshold: float = 0.5  # th of Eq. 3, stored with the model for the planner
     match_radius_px: float = 16.0  # Table 1: a prediction within this of a same-class truth
-    num_threads: int = 2  # torch CPU threads (fixed: results depend on it)
+    num_threads: int = 2  # torch CPU threads (fixed: results depend on it); split among DDP ranks
+    loader_workers: int = 1  # processes decoding batches (0 = the training process); result-neutral
     device: str = "auto"  # "auto" (CUDA when available) | "cpu" | "cuda"
     log_samples: int = 4  # test images logged with their predictions
     force: bool = False
@@ -373,6 +374,25 @@ class LoggingConfig:
 
 
 @dataclass
+class ExecutorConfig:
+    """Where the scene-parallel stages run their shards (``pipeline.executor``), chosen with
+    ``executor=local|ray``. Not part of any version key: the artifacts are the same under both.
+
+    ``name``: ``"local"`` (a fork process pool on this machine) or ``"ray"`` (Ray actors).
+    The other fields are read by ``ray`` only: ``address`` of a Ray cluster (null: start a
+    private local instance for the run; on a cluster ``paths.root`` must be a filesystem shared
+    by every node at the same path), CPUs reserved per worker, the private instance's object
+    store size, and whether the workers' output is printed by the driver.
+    """
+
+    name: str = "local"
+    address: Optional[str] = None
+    num_cpus_per_task: float = 1.0
+    object_store_memory_mb: int = 512
+    log_to_driver: bool = True
+
+
+@dataclass
 class PipelineConfig:
     """The root of every stage's configuration."""
 
@@ -400,6 +420,7 @@ class PipelineConfig:
     evaluate: EvaluateConfig = field(default_factory=EvaluateConfig)
     eval_boxes: BoxesConfig = field(default_factory=BoxesConfig)
     logging: LoggingConfig = field(default_factory=LoggingConfig)
+    executor: ExecutorConfig = field(default_factory=ExecutorConfig)
 
 
 def register_configs() -> None:
