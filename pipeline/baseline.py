@@ -46,7 +46,10 @@ import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
 
-from pipeline.artifacts import compute_version, load_manifest, resolve_artifact, run_stage, stage_config
+from pipeline.artifacts import (
+    artifact_file, check_artifact, compute_version, load_manifest, resolve_artifact, run_stage,
+    stage_config,
+)
 from pipeline.artifacts.store import ArtifactError, StageRun
 from pipeline.cli import CONF_DIR, data_root, stage_main
 from pipeline.dataset.scenes import SPLIT_CODES, SPLITS, Scene, SceneDataset
@@ -177,8 +180,9 @@ def plan_tasks(gen_dir: Path, out_dir: Path, max_train_scenes: int) -> list[Cand
             count = shard["count"] if budget is None else min(shard["count"], budget)
             if count <= 0:
                 break
+            name = artifact_file(gen_dir, shard["file"]).name  # ArtifactError if outside
             tasks.append(CandidateTask(split, shard["first"], count,
-                                       str(out_dir / "candidates" / Path(shard["file"]).name)))
+                                       str(out_dir / "candidates" / name)))
             if budget is not None:
                 budget -= count
     return tasks
@@ -187,7 +191,7 @@ def plan_tasks(gen_dir: Path, out_dir: Path, max_train_scenes: int) -> list[Cand
 def load_candidates(folder: Path, split: str) -> dict[str, np.ndarray]:
     """Every labelled candidate of a split, concatenated over its shards."""
     meta = json.loads((folder / "candidates.json").read_text())
-    parts = [read_npz(folder / f) for f in meta["splits"][split]]
+    parts = [read_npz(artifact_file(folder, f)) for f in meta["splits"][split]]
     if not parts:
         return {}
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
@@ -456,18 +460,20 @@ def _train_artifact(cfg) -> Path | None:
         return None
     models = Path(cfg.paths.models)
     try:
-        return resolve_artifact(models, "train", version)
+        folder = resolve_artifact(models, "train", version, key="baseline.train_version")
     except ArtifactError:
         if version != "latest":
             raise
         print("[baseline] no training artifact yet: Table 2 leaves the project's planner out "
               "(run `make train` first, or pass baseline.train_version=none to silence this).")
         return None
+    return check_artifact(folder, "baseline.train_version")  # files match the manifest
 
 
 def baseline(cfg: DictConfig) -> Path:
     """Label candidates, train the GQ-CNN, evaluate Table 2; returns the artifact folder."""
-    gen_dir = resolve_artifact(data_root(cfg), STAGE_UPSTREAM, cfg.baseline.generate_version)
+    gen_dir = resolve_artifact(data_root(cfg), STAGE_UPSTREAM, cfg.baseline.generate_version,
+                               verify=True, key="baseline.generate_version")
     for variant in cfg.baseline.variants:
         if variant not in PLANNER_NAMES or variant == OURS:
             raise ValueError(f"baseline.variants has {variant!r}: choose from gqcnn, planarity")

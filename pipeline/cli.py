@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import functools
+import importlib
 import os
 import sys
 from pathlib import Path
+from types import ModuleType
 from typing import Callable
 
 from omegaconf import DictConfig, OmegaConf
@@ -34,16 +36,51 @@ def data_root(cfg: DictConfig) -> Path:
     return Path(cfg.paths.data)
 
 
+class MissingLibraryError(ImportError):
+    """A package, or a system library it loads, cannot be imported; the message gives the fix."""
+
+
+# Packages that need a system library pip does not install: the library and how to install it.
+SYSTEM_LIBRARIES = {
+    "open3d": ("libusb-1.0", "`sudo apt-get install libusb-1.0-0` (Debian/Ubuntu), or run "
+                             "`bash scripts/setup.sh` as root"),
+}
+
+
+def import_with_fix(name: str) -> ModuleType:
+    """``import <name>``, or a ``MissingLibraryError`` that says how to make it importable.
+
+    Use it for packages with system-library needs (:data:`SYSTEM_LIBRARIES`): open3d fails
+    with an OSError or ImportError about ``libusb-1.0.so.0`` when the Debian package
+    ``libusb-1.0-0`` is missing.
+    """
+    try:
+        return importlib.import_module(name)
+    except (ImportError, OSError) as e:
+        library, fix = SYSTEM_LIBRARIES.get(
+            name, (None, "reinstall the environment: `make setup` (or `bash scripts/setup.sh`)"))
+        needs = f" (it needs the system library {library})" if library else ""
+        raise MissingLibraryError(
+            f"cannot import {name}{needs}: {type(e).__name__}: {e}. Fix: {fix}.",
+            name=name) from e
+
+
 def stage_main(stage_fn: Callable[[DictConfig], object]) -> Callable[[DictConfig], None]:
-    """Wrap a stage function for ``@hydra.main``: known errors print one clear line, exit 2."""
+    """Wrap a stage function for ``@hydra.main``: known errors print one clear line, exit 2.
+
+    Known errors: ``ArtifactError`` (missing, mistyped or corrupted artifact),
+    ``MissingLibraryError`` (``import_with_fix``), ``FileNotFoundError`` and ``ValueError``
+    (bad input or configuration). Anything else is a bug and keeps its traceback.
+    """
     from pipeline.artifacts.store import ArtifactError
 
     @functools.wraps(stage_fn)
     def main(cfg: DictConfig) -> None:
         try:
             stage_fn(cfg)
-        except (ArtifactError, FileNotFoundError, ValueError) as e:
-            print(f"error: {e}", file=sys.stderr)
+        except (ArtifactError, MissingLibraryError, FileNotFoundError, ValueError) as e:
+            message = " ".join(str(e).split())  # one line
+            print(f"error: {message}", file=sys.stderr)
             sys.exit(2)
 
     return main

@@ -245,10 +245,12 @@ def evaluate(cfg: DictConfig) -> Path:
         raise ValueError(f"evaluate.num_trials must be >= 1, got {cfg.evaluate.num_trials}")
     upstream, train_dir, baseline_dir = {}, None, None
     if "dcnn" in planners:
-        train_dir = resolve_artifact(Path(cfg.paths.models), "train", cfg.evaluate.train_version)
+        train_dir = resolve_artifact(Path(cfg.paths.models), "train", cfg.evaluate.train_version,
+                                     verify=True, key="evaluate.train_version")
         upstream["train"] = train_dir.name
     if "dexnet" in planners and str(cfg.evaluate.dexnet_variant) == "gqcnn":
-        baseline_dir = resolve_artifact(data_root(cfg), "baseline", cfg.evaluate.baseline_version)
+        baseline_dir = resolve_artifact(data_root(cfg), "baseline", cfg.evaluate.baseline_version,
+                                        verify=True, key="evaluate.baseline_version")
         upstream["baseline"] = baseline_dir.name
     config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
     version = compute_version(STAGE, config, upstream)

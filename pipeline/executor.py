@@ -64,10 +64,12 @@ def _get(node: Any, key: str, default: Any = None) -> Any:
 
 def import_ray():
     """The ``ray`` module, or an ImportError that says how to install it."""
+    from pipeline.cli import MissingLibraryError
+
     try:
         import ray
     except ImportError as e:
-        raise ImportError(RAY_INSTALL_HINT) from e
+        raise MissingLibraryError(RAY_INSTALL_HINT) from e
     return ray
 
 

@@ -34,7 +34,9 @@ import hydra
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
-from pipeline.artifacts import compute_version, resolve_artifact, run_stage, stage_config
+from pipeline.artifacts import (
+    artifact_file, compute_version, resolve_artifact, run_stage, stage_config,
+)
 from pipeline.artifacts.store import StageRun
 from pipeline.camera.geometry import quat_from_matrix
 from pipeline.cli import CONF_DIR, data_root, stage_main
@@ -203,7 +205,7 @@ def plan_tasks(gen_dir: Path, out_dir: Path) -> list[LabelTask]:
     tasks = []
     for split in SPLITS:
         for shard in index["splits"][split]:
-            name = Path(shard["file"]).name
+            name = artifact_file(gen_dir, shard["file"]).name  # ArtifactError if outside
             tasks.append(LabelTask(split, shard["file"], shard["first"], shard["count"],
                                    str(out_dir / "labels" / name)))
     return tasks
@@ -222,6 +224,8 @@ class LabelSet:
         self.folder = Path(folder)
         meta = json.loads((self.folder / "labels.json").read_text())
         self.shards = meta["splits"][split]
+        # Shard paths, checked to stay inside the artifact folder (ArtifactError otherwise).
+        self._paths = [artifact_file(self.folder, s["file"]) for s in self.shards]
         self._starts = np.array([s["first"] for s in self.shards], dtype=np.int64)
         self._len = int(sum(s["count"] for s in self.shards))
         self._cache = None
@@ -234,7 +238,7 @@ class LabelSet:
             raise IndexError(f"scene {i} out of range ({self._len} scenes)")
         k = int(np.searchsorted(self._starts, i, side="right") - 1)
         if self._cache is None or self._cache[0] != k:
-            arrays = read_npz(self.folder / self.shards[k]["file"])
+            arrays = read_npz(self._paths[k])
             starts = np.concatenate([[0], np.cumsum(arrays["points_per_scene"])])
             self._cache = (k, arrays, starts)
         _, arrays, starts = self._cache
@@ -301,7 +305,8 @@ def _quat_from_axes(x, y, z) -> np.ndarray:
 
 def label(cfg: DictConfig) -> Path:
     """Run the labelling stage on a generation artifact; returns the label artifact folder."""
-    gen_dir = resolve_artifact(data_root(cfg), "generate", cfg.label.generate_version)
+    gen_dir = resolve_artifact(data_root(cfg), "generate", cfg.label.generate_version,
+                               verify=True, key="label.generate_version")
     config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
     version = compute_version(STAGE, config, upstream={"generate": gen_dir.name})
     cfg_obj = OmegaConf.to_object(cfg)

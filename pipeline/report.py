@@ -63,6 +63,7 @@ from omegaconf import DictConfig
 from pipeline.artifacts import (
     ArtifactError,
     available_versions,
+    check_artifact,
     compute_version,
     load_manifest,
     resolve_artifact,
@@ -308,11 +309,12 @@ def _optional_artifact(root: Path, stage: str, version: str) -> Path | None:
     """An upstream the report can do without: None when ``version`` is "latest" and no
     ``stage`` artifact exists yet; a named version that does not exist is an error."""
     try:
-        return resolve_artifact(root, stage, version)
+        folder = resolve_artifact(root, stage, version, key=f"report.{stage}_version")
     except ArtifactError:
         if version == "latest" and not available_versions(root, stage):
             return None
         raise
+    return check_artifact(folder, f"report.{stage}_version")  # files match the manifest
 
 
 def resolve_labels(root: Path, version: str, gen_version: str) -> LabelInfo | None:
@@ -970,7 +972,8 @@ def report(cfg: DictConfig) -> Path:
     all is fine: the report then leaves the labels out).
     """
     root = data_root(cfg)
-    gen_dir = resolve_artifact(root, "generate", cfg.report.generate_version)
+    gen_dir = resolve_artifact(root, "generate", cfg.report.generate_version, verify=True,
+                               key="report.generate_version")
     gen_version = gen_dir.name
     gen_manifest = load_manifest(gen_dir)
     splits = _split_metrics(gen_manifest, gen_dir)

@@ -48,6 +48,8 @@ import csv
 import dataclasses
 import math
 import os
+import pickle
+import re
 import time
 from pathlib import Path
 
@@ -58,7 +60,7 @@ from omegaconf import DictConfig, OmegaConf
 from tqdm import tqdm
 
 from pipeline.artifacts import compute_version, load_manifest, resolve_artifact, run_stage, stage_config
-from pipeline.artifacts.store import StageRun
+from pipeline.artifacts.store import ArtifactError, StageRun
 from pipeline.camera.geometry import backproject
 from pipeline.cli import CONF_DIR, data_root, stage_main
 from pipeline.label import CLASS_COLORS, LabelSet
@@ -216,14 +218,49 @@ def _epoch_batches(n: int, batch: int, seed: int, epoch: int, flip: str,
 
 
 def _load_resume(ckpt_path: Path, net, opt, epochs: int) -> tuple[dict | None, int]:
-    """(history, epoch) of a resumable checkpoint, loaded into ``net`` and ``opt``; else (None, 0)."""
+    """(history, epoch) of a resumable checkpoint, loaded into ``net`` and ``opt``; else (None, 0).
+
+    No file, or one past ``epochs``: (None, 0), training starts at epoch 0. A file that cannot be
+    used (truncated, not a torch checkpoint, pickled objects other than tensors and plain data,
+    which ``torch.load(weights_only=True)`` refuses to unpickle, or the weights or optimiser
+    state of another network) raises ``ArtifactError`` naming the file and the fix (delete its
+    ``.resume-*`` folder), rather than being ignored: training from scratch would silently
+    overwrite it, and such a file was not written by this stage. ``train.force=true`` does not
+    help: it recomputes the artifact but still resumes from the checkpoint.
+    """
     if not ckpt_path.is_file():
         return None, 0
-    ckpt = torch.load(ckpt_path, map_location="cpu", weights_only=True)
+
+    def refuse(reason: str) -> ArtifactError:
+        return ArtifactError(
+            f"[train] cannot resume from {ckpt_path}: {reason}. Fix: delete the folder "
+            f"{ckpt_path.parent} (`rm -r {ckpt_path.parent}`) to train from epoch 0 "
+            "(train.force=true alone does not: it still resumes from this file).")
+
+    try:
+        ckpt = torch.load(ckpt_path, map_location="cpu", weights_only=True)
+    except Exception as e:  # truncated, empty, not a torch file, or refused by weights_only
+        text = str(e).split("WeightsUnpickler error:")[-1]
+        lines = [line.strip() for line in text.splitlines() if line.strip()] or [""]
+        blocked = re.search(r"GLOBAL\s+([\w.]+)", text)
+        if isinstance(e, pickle.UnpicklingError) and blocked:
+            raise refuse("it holds pickled objects other than tensors and plain data, which "
+                         f"torch.load(weights_only=True) refuses to load (it asks for "
+                         f"{blocked.group(1)})") from None
+        raise refuse(f"it is not a readable torch checkpoint (truncated or not written by "
+                     f"torch.save: {type(e).__name__}: {lines[0].split('. ')[0][:160]})") from None
+    keys = ("model", "optimizer", "epoch", "history")
+    if not isinstance(ckpt, dict) or not all(k in ckpt for k in keys) \
+            or not isinstance(ckpt["epoch"], int):
+        raise refuse(f"it is not a training checkpoint (expected a dict with {', '.join(keys)})")
     if ckpt["epoch"] > epochs:
         return None, 0
-    net.load_state_dict(ckpt["model"])
-    opt.load_state_dict(ckpt["optimizer"])
+    try:
+        net.load_state_dict(ckpt["model"])
+        opt.load_state_dict(ckpt["optimizer"])
+    except (RuntimeError, ValueError, KeyError, TypeError, AttributeError) as e:
+        detail = " ".join(line.strip() for line in str(e).splitlines()[:2])[:240]
+        raise refuse(f"its weights or optimiser state are of another network ({detail})") from None
     return ckpt["history"], int(ckpt["epoch"])
 
 
@@ -235,9 +272,16 @@ def train(cfg: DictConfig) -> Path | None:
     return None.
     """
     ctx = distributed.from_env()
-    label_dir = resolve_artifact(data_root(cfg), "label", cfg.train.label_version)
-    gen_version = load_manifest(label_dir)["upstream"]["generate"]
-    gen_dir = resolve_artifact(data_root(cfg), "generate", gen_version)
+    label_dir = resolve_artifact(data_root(cfg), "label", cfg.train.label_version, verify=True,
+                                 key="train.label_version")
+    gen_version = (load_manifest(label_dir).get("upstream") or {}).get("generate")
+    try:
+        gen_dir = resolve_artifact(data_root(cfg), "generate", str(gen_version), verify=True)
+    except ArtifactError as e:
+        raise ArtifactError(
+            f"[train] the label artifact {label_dir.name} (train.label_version) was made from the "
+            f"generation artifact {gen_version}: {e} Or pick another label artifact with "
+            "train.label_version=<version>.") from None
     if cfg.train.augment_flip not in FLIPS:
         raise ValueError(f"train.augment_flip={cfg.train.augment_flip!r}; choose one of {FLIPS}")
     device = pick_device(cfg.train.device)
@@ -329,7 +373,13 @@ def train(cfg: DictConfig) -> Path | None:
             if start_epoch is None:  # rank 0 found the artifact or failed before training
                 return None
             net, opt = setup()
-            history, _ = _load_resume(ckpt_path, net, opt, int(tc.epochs)) if start_epoch else (None, 0)
+            history, loaded = (_load_resume(ckpt_path, net, opt, int(tc.epochs))
+                               if start_epoch else (None, 0))
+            if loaded != start_epoch:
+                raise FileNotFoundError(
+                    f"rank {ctx.rank} cannot read the checkpoint {ckpt_path} that rank 0 resumes "
+                    f"from at epoch {start_epoch}: paths.models must be one filesystem shared by "
+                    "every node")
             distributed.barrier(ctx)  # rank 0 has built the depth cache
             fit(net, opt, dataset("train"), history or _new_history(), start_epoch,
                 lambda epoch: None)

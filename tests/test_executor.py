@@ -101,14 +101,16 @@ def test_ray_task_error_surfaces_with_its_message(ray_instance):
     assert "Ray worker" in "".join(getattr(info.value, "__notes__", []))
 
 
-def test_ray_task_error_fails_the_stage(artifacts, tmp_path):
+def test_ray_task_error_fails_the_stage(artifacts, tmp_path, monkeypatch):
     """A labelling worker that cannot read its shard: the stage raises the worker's error and
-    leaves no label artifact, no work folder."""
+    leaves no label artifact, no work folder. (The driver's check of the upstream artifact
+    against its manifest would catch the missing shard first: it is switched off here.)"""
     gen = artifacts["ray", 2][0]
     copy = tmp_path / "data" / "generate" / gen.name
     shutil.copytree(gen, copy)
     shard = sorted(copy.rglob("*.npz"))[-1]
     shard.unlink()
+    monkeypatch.setattr("pipeline.artifacts.store.verify_artifact", lambda folder: [])
     with pytest.raises(FileNotFoundError, match=shard.name):
         label(_cfg("label", tmp_path, "ray", 2, f"label.generate_version={gen.name}"))
     label_dir = tmp_path / "data" / "label"

@@ -220,19 +220,93 @@ def available_versions(data_root: Path, stage: str) -> list[str]:
     )
 
 
-def resolve_artifact(data_root: Path, stage: str, version: str = "latest") -> Path:
-    """Folder of a complete artifact, by version key or ``"latest"``; a clear error otherwise."""
+def resolve_artifact(data_root: Path, stage: str, version: str = "latest", *,
+                     verify: bool = False, key: str | None = None) -> Path:
+    """Folder of a complete artifact, by version key or ``"latest"``; a clear error otherwise.
+
+    Args:
+        verify: also re-hash its files against the manifest (``check_artifact``): what a stage
+            does before reading an upstream artifact (about 0.15 s for the 80 MB generation
+            artifact of ``default``, with the files in the page cache).
+        key: the config key that asked for ``version`` (``"label.generate_version"``), named in
+            the error message with the fix.
+
+    Raises:
+        ArtifactError: no such complete artifact (the message lists the available versions and
+            the fix), or with ``verify`` a file that does not match the manifest.
+    """
     stage_dir = Path(data_root) / stage
+    version = str(version)
+    asked = f"{key}={version}" if key else f"version '{version}'"
+    who = f"[{key.split('.')[0]}] " if key else ""
     if not version or version.startswith(".") or "/" in version or "\\" in version:
-        raise ArtifactError(f"'{version}' is not a version name: give a version key or 'latest'.")
+        raise ArtifactError(f"{who}{asked}: '{version}' is not a version name: give a version "
+                            "key or 'latest'.")
     folder = stage_dir / version
     if (folder / MANIFEST).is_file():
-        return folder.resolve()
+        folder = folder.resolve()
+        return check_artifact(folder, key) if verify else folder
     known = available_versions(data_root, stage)
-    hint = (f"available versions: {', '.join(known)}" if known
-            else f"none exist yet: run `make {stage}` (or `python -m pipeline.{stage}`) first")
+    if known:
+        hint = f"available versions: {', '.join(known)}"
+        fix = (f"pass {key}=<one of those> or {key}=latest" if key
+               else "give one of those or 'latest'")
+        fix += f", or run `make {stage}` (`python -m pipeline.{stage}`) to create it"
+    else:
+        hint = "none exist yet"
+        fix = f"run `make {stage}` (or `python -m pipeline.{stage}`) first"
     raise ArtifactError(
-        f"No complete '{stage}' artifact named '{version}' under {stage_dir} ({hint})."
+        f"{who}{asked}: no complete '{stage}' artifact named '{version}' under {stage_dir} "
+        f"({hint}). Fix: {fix}."
+    )
+
+
+def artifact_file(folder: Path, rel: str) -> Path:
+    """``folder / rel`` for a file name read from an artifact (manifest.json, index.json,
+    labels.json, ...), after checking that it stays inside the artifact folder.
+
+    Raises:
+        ArtifactError: ``rel`` is not a relative path, climbs out with ``..``, or leads outside
+            ``folder`` through a symbolic link.
+    """
+    folder = Path(folder)
+    bad = None
+    if not isinstance(rel, str) or not rel or "\x00" in rel or "\\" in rel:
+        bad = "is not a relative file name"
+    elif rel.startswith("/") or (len(rel) > 1 and rel[1] == ":"):
+        bad = "is an absolute path"
+    elif ".." in rel.split("/"):
+        bad = "climbs out of the artifact folder with '..'"
+    else:
+        root = folder.resolve()
+        path = (folder / rel).resolve()
+        if root not in path.parents:
+            bad = "leads outside the artifact folder (through a symbolic link)"
+    if bad is not None:
+        stage = folder.resolve().parent.name
+        raise ArtifactError(
+            f"{folder}: the file name {rel!r} it lists {bad}; the artifact is corrupted or was "
+            f"tampered with. Fix: recompute it (the {stage} stage with {stage}.force=true), or "
+            "run `make verify` to list every problem.")
+    return folder / rel
+
+
+def check_artifact(folder: Path, key: str | None = None) -> Path:
+    """``folder`` if its files match its manifest (``verify_artifact``); else ArtifactError
+    naming the artifact, the bad files and the fix. ``key``: the config key that chose it."""
+    problems = verify_artifact(folder)
+    if not problems:
+        return folder
+    stage = Path(folder).resolve().parent.name
+    shown = "; ".join(problems[:5])
+    if len(problems) > 5:
+        shown += f"; and {len(problems) - 5} more"
+    who = f"[{key.split('.')[0]}] " if key else ""
+    via = f" ({key})" if key else ""
+    raise ArtifactError(
+        f"{who}the '{stage}' artifact {folder}{via} does not match its manifest: {shown}. "
+        f"Fix: recompute it (rerun the {stage} stage with the same settings and "
+        f"{stage}.force=true), or run `make verify` to list every problem."
     )
 
 
@@ -255,17 +329,29 @@ def verify_artifact(folder: Path) -> list[str]:
         return [str(e)]
     problems = []
     root = folder.resolve()
-    for rel, meta in sorted(manifest.get("files", {}).items()):
-        path = (folder / rel).resolve()
-        if root not in path.parents:
+    files = manifest.get("files") if isinstance(manifest, dict) else None
+    if not isinstance(files, dict):
+        return [f"{MANIFEST}: has no 'files' table"]
+    for rel, meta in sorted(files.items()):
+        try:
+            path = artifact_file(root, rel)
+        except ArtifactError:
             problems.append(f"{rel}: path points outside the artifact folder")
             continue
         if not path.is_file():
             problems.append(f"{rel}: missing")
             continue
-        if path.stat().st_size != meta["bytes"] or sha256_file(path) != meta["sha256"]:
-            problems.append(f"{rel}: changed (sha256 or size differs from the manifest)")
-    listed = set(manifest.get("files", {}))
+        try:
+            size, sha = int(meta["bytes"]), str(meta["sha256"])
+        except (KeyError, TypeError, ValueError):
+            problems.append(f"{rel}: the manifest's entry lacks bytes / sha256")
+            continue
+        if path.stat().st_size != size:
+            problems.append(f"{rel}: changed ({path.stat().st_size} bytes, the manifest says "
+                            f"{size})")
+        elif sha256_file(path) != sha:
+            problems.append(f"{rel}: changed (sha256 differs from the manifest)")
+    listed = set(files)
     for path in sorted(p for p in folder.rglob("*") if p.is_file()):
         rel = path.relative_to(folder).as_posix()
         if rel != MANIFEST and rel not in listed:

@@ -36,6 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.artifacts.store import artifact_file
 from pipeline.camera.geometry import Intrinsics
 from pipeline.dataset.storage import read_npz
 
@@ -106,6 +107,8 @@ class SceneDataset:
         # The bin the scenes were generated in (same fields as ``conf/bin/*.yaml``).
         self.bin = SimpleNamespace(**self.meta["bin"])
         self._shards = index["splits"][split]  # [{"file": ..., "first": i0, "count": n}, ...]
+        # Shard paths, checked to stay inside the artifact folder (ArtifactError otherwise).
+        self._paths = [artifact_file(self.root, s["file"]) for s in self._shards]
         self._starts = np.array([s["first"] for s in self._shards], dtype=np.int64)
         self._len = int(sum(s["count"] for s in self._shards))
         self._cache: tuple[int, dict[str, np.ndarray], np.ndarray] | None = None
@@ -115,7 +118,7 @@ class SceneDataset:
 
     def _shard(self, k: int) -> tuple[dict[str, np.ndarray], np.ndarray]:
         if self._cache is None or self._cache[0] != k:
-            arrays = read_npz(self.root / self._shards[k]["file"])
+            arrays = read_npz(self._paths[k])
             box_start = np.concatenate([[0], np.cumsum(arrays["num_boxes"])]).astype(np.int64)
             self._cache = (k, arrays, box_start)
         return self._cache[1], self._cache[2]

@@ -19,6 +19,18 @@ Steps (gqcnn's ``CrossEntropyRobustGraspingPolicy`` with a suction sampler):
 3. **CEM** over suction candidates (``pipeline.dexnet.cem``) scored by one quality:
    ``gqcnn`` (the trained GQ-CNN, ``pipeline.dexnet.gqcnn``) or ``planarity`` (the analytic disc
    approach planarity, ``pipeline.dexnet.quality``; no training).
+
+**Bad input** (as the project's planner): the depth image goes through
+``pipeline.camera.depth_input.check_depth_image`` (shape from the intrinsics): a wrong shape,
+ndim or dtype (e.g. a raw uint16 image) raises its ``DepthImageError`` (a ``ValueError``);
+NaN, ±inf, ≤ 0 and implausible depths become 0 = no data, which is never sampled. ``plan``
+returns ``[]`` (no grasp) when there is nothing to grasp, and ``planner.last_reason`` says why
+(``NO_GRASP_REASONS``): ``"no_valid_depth"`` (no pixel has data), ``"no_object_pixels"`` (no
+pixel with data inside the bin above ``object_margin``: an empty bin), ``"no_candidates"`` (object
+pixels, but none acceptable: too few with a full Sobel window, all in the border or too steep).
+``last_reason`` is ``""`` after a plan with a grasp. ``load_gqcnn`` raises
+``pipeline.planner.planner.ModelFileError`` (a ``ValueError``) naming the file and the fix for
+a file that is not a GQ-CNN of this version (truncated, garbage, other keys or shapes).
 """
 
 from __future__ import annotations
@@ -27,8 +39,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import torch
 
+from pipeline.camera.depth_input import check_depth_image
 from pipeline.camera.geometry import Intrinsics
 from pipeline.dexnet.cem import CEMConfig, CEMResult, cross_entropy_method
 from pipeline.dexnet.gqcnn import (
@@ -36,9 +48,19 @@ from pipeline.dexnet.gqcnn import (
 )
 from pipeline.dexnet.quality import PlanarityConfig, disc_planarity
 from pipeline.dexnet.sampling import Candidates, PointCloudImage, SamplerConfig, point_cloud_image
+from pipeline.planner.planner import ModelFileError, build_from_blob, read_model_file
 
 VARIANTS = ("gqcnn", "planarity")
 MODEL_FILE = "gqcnn.pt"
+MODEL_KEYS = ("network", "crop", "state_dict")
+REBUILD_FIX = ("re-run the baseline stage with `make baseline` (`python -m pipeline.baseline`), "
+               "or pass a data/baseline/<version> folder made by this version of the pipeline")
+
+# ``DexNetPlanner.last_reason`` after a plan without a grasp (see the module docstring).
+NO_VALID_DEPTH = "no_valid_depth"
+NO_OBJECT_PIXELS = "no_object_pixels"
+NO_CANDIDATES = "no_candidates"
+NO_GRASP_REASONS = (NO_VALID_DEPTH, NO_OBJECT_PIXELS, NO_CANDIDATES)
 
 
 @dataclass
@@ -132,10 +154,16 @@ def load_gqcnn(model_dir: Path | str) -> tuple[GQCNN, CropConfig]:
     if not path.is_file():
         raise FileNotFoundError(f"{path} not found: give a baseline artifact folder "
                                 "(data/baseline/<version>) made by `python -m pipeline.baseline`")
-    blob = torch.load(path, map_location="cpu", weights_only=True)
-    net = GQCNN(GQCNNConfig(**blob["network"]))
-    net.load_state_dict(blob["state_dict"])
-    return net.eval(), CropConfig(**blob["crop"])
+    blob = read_model_file(path, MODEL_KEYS, "GQ-CNN (gqcnn.pt of `python -m pipeline.baseline`)",
+                           REBUILD_FIX)
+    net = build_from_blob(path, REBUILD_FIX, lambda: GQCNN(GQCNNConfig(**blob["network"])),
+                          blob["state_dict"])
+    try:
+        crop = CropConfig(**blob["crop"])
+    except TypeError as exc:
+        raise ModelFileError(f"{path}: its crop config does not fit this version of the "
+                             f"pipeline ({exc}): {REBUILD_FIX}") from None
+    return net.eval(), crop
 
 
 class DexNetPlanner:
@@ -154,6 +182,7 @@ class DexNetPlanner:
         self.crop, self.net = crop, net
         self.seed = seed
         self._calls = 0
+        self.last_reason = ""  # why the last plan/run_cem found no grasp (NO_GRASP_REASONS)
 
     @classmethod
     def from_config(cls, cfg, variant: str, T_world_cam: np.ndarray,
@@ -177,24 +206,47 @@ class DexNetPlanner:
 
     def run_cem(self, depth_m: np.ndarray, intrinsics: Intrinsics,
                 rng: np.random.Generator) -> CEMResult:
-        """The whole CEM run (every iteration's candidates and scores, for logging)."""
-        depth_m = _check_depth(depth_m)
+        """The whole CEM run (every iteration's candidates and scores, for logging).
+
+        Bad depth values are no data, a bad shape/dtype raises a ``ValueError`` (module
+        docstring); without a candidate the result's ``best`` is empty and ``self.last_reason``
+        says why."""
+        return self._run_cem(self._check(depth_m, intrinsics), intrinsics, rng)
+
+    def _check(self, depth_m: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
+        return check_depth_image(depth_m, (intrinsics.height, intrinsics.width), name="depth_m")
+
+    def _run_cem(self, depth_m: np.ndarray, intrinsics: Intrinsics,
+                 rng: np.random.Generator) -> CEMResult:
+        none = CEMResult(best=Candidates.empty(), best_score=-np.inf)
+        self.last_reason = ""
+        if not (depth_m > 0).any():
+            self.last_reason = NO_VALID_DEPTH
+            return none
         mask = self.workspace.object_mask(depth_m, intrinsics)
+        if not mask.any():
+            self.last_reason = NO_OBJECT_PIXELS
+            return none
         cloud = point_cloud_image(depth_m, intrinsics, self.sampler, object_mask=mask)
-        return cross_entropy_method(cloud, lambda c: self.score(depth_m, cloud, c), self.cem,
-                                    self.sampler, rng)
+        result = cross_entropy_method(cloud, lambda c: self.score(depth_m, cloud, c), self.cem,
+                                      self.sampler, rng)
+        if len(result.best) == 0:
+            self.last_reason = NO_CANDIDATES
+        return result
 
     def plan(self, depth_m: np.ndarray, intrinsics: Intrinsics,
              rng: np.random.Generator | None = None) -> list[SuctionGrasp]:
-        """One (H, W) depth image, metres → ``[best grasp]``, or ``[]`` when no candidate exists.
+        """One (H, W) depth image, metres → ``[best grasp]``, or ``[]`` when no candidate exists
+        (the reason in ``self.last_reason``).
 
         ``rng`` defaults to a generator seeded by (seed, number of earlier calls), so a planner
-        replays the same sequence of plans.
+        replays the same sequence of plans. A rejected image (``ValueError``) is not counted.
         """
+        depth_m = self._check(depth_m, intrinsics)
         if rng is None:
             rng = np.random.default_rng([self.seed, self._calls])
         self._calls += 1
-        result = self.run_cem(depth_m, intrinsics, rng)
+        result = self._run_cem(depth_m, intrinsics, rng)
         return grasps_of(result)
 
 
@@ -206,13 +258,3 @@ def grasps_of(result: CEMResult) -> list[SuctionGrasp]:
     return [SuctionGrasp(u=float(b.uv[0, 0]), v=float(b.uv[0, 1]), score=float(result.best_score),
                          depth=float(b.depth[0]), point_cam=b.point[0].copy(),
                          normal_cam=-axis, axis_cam=axis.copy(), angle=float(b.angle[0]))]
-
-
-def _check_depth(depth_m: np.ndarray) -> np.ndarray:
-    depth_m = np.asarray(depth_m)
-    if depth_m.ndim != 2:
-        raise ValueError(f"plan takes one (H, W) depth image in metres, got shape {depth_m.shape}")
-    if depth_m.dtype not in (np.float32, np.float64):
-        raise ValueError(f"depth must be float32/float64 metres, got dtype {depth_m.dtype} "
-                         "(convert a uint16 image with its depth unit first)")
-    return depth_m

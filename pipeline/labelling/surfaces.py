@@ -289,7 +289,9 @@ def _ransac_numpy(sample: np.ndarray, cfg: SurfaceDetectionConfig,
 def _ransac_open3d(sample: np.ndarray, cfg: SurfaceDetectionConfig,
                    seed: int) -> tuple[np.ndarray, float] | None:
     """open3d's ``segment_plane`` on the sample (not reproducible run to run, see the config)."""
-    import open3d as o3d  # imported here: ~1.5 s, and only this optional backend needs it
+    from pipeline.cli import import_with_fix  # its error says how to install libusb-1.0
+
+    o3d = import_with_fix("open3d")  # imported here: ~1.5 s, and only this backend needs it
 
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(sample))
     o3d.utility.random.seed(seed)

@@ -5,23 +5,117 @@
 
 ``model.pt`` (written by ``pipeline.train``) holds the weights, the network config, the depth
 normalisation and the ranking config (th, D_ground), so a planner needs nothing else.
+
+**Bad input.** The depth image goes through ``pipeline.camera.depth_input.check_depth_image``:
+a wrong shape, ndim or dtype (e.g. a raw uint16 image) raises its ``DepthImageError`` (a
+``ValueError``) naming the fix; NaN, ±inf, ≤ 0 and implausible depths become 0 = no data. A
+candidate is only ever returned at a pixel with data: ``plan`` drops the candidates whose
+nearest pixel has none (``rank_grasps`` alone would give them the window's median depth). When
+``plan`` returns no candidate, ``planner.last_reason`` says why (``NO_GRASP_REASONS``); it is
+``""`` after a plan with candidates.
+
+**Bad model files.** ``Planner.load`` raises ``ModelFileError`` (a ``ValueError``) naming the
+file, what was expected and the fix, for a file that is not a readable checkpoint (truncated,
+garbage), lacks one of ``MODEL_KEYS``, or holds weights that do not fit the network its config
+describes (missing or unexpected tensors, other shapes, e.g. another width). It always loads
+with ``weights_only=True``.
 """
 
 from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 import torch
 
+from pipeline.camera.depth_input import check_depth_image
 from pipeline.camera.geometry import Intrinsics
+from pipeline.labelling.types import GraspClass
 from pipeline.planner.data import Normalisation, normalise_depth
 from pipeline.planner.decode import decode_output
 from pipeline.planner.network import GraspNet, NetworkConfig
 from pipeline.planner.ranking import GraspCandidate, RankingConfig, rank_grasps
 
 MODEL_FILE = "model.pt"
+MODEL_KEYS = ("state_dict", "network", "normalisation", "ranking")
+RETRAIN_FIX = ("retrain with `make train` (`python -m pipeline.train`), or pass a "
+               "models/train/<version> folder made by this version of the pipeline")
+
+# ``Planner.last_reason`` after a plan that returned no candidate.
+NO_VALID_DEPTH = "no_valid_depth"  # no pixel of the image has data (all NaN/inf/<= 0, ...)
+NO_PREDICTION = "no_prediction"  # no cell above the threshold th with a class other than NG
+NO_RANKABLE_CANDIDATE = "no_rankable_candidate"  # every prediction lacked depth or a normal
+NO_GRASP_REASONS = (NO_VALID_DEPTH, NO_PREDICTION, NO_RANKABLE_CANDIDATE)
+
+
+class ModelFileError(ValueError):
+    """A model file that this version of the pipeline cannot load."""
+
+
+def read_model_file(path: Path, keys: tuple[str, ...], what: str, fix: str) -> dict:
+    """``torch.load(path, weights_only=True)`` of a dict holding ``keys``, else a
+    ``ModelFileError`` naming the file, ``what`` it should be and the ``fix``."""
+    try:
+        blob = torch.load(path, map_location="cpu", weights_only=True)
+    except OSError:
+        raise
+    except Exception as exc:  # truncated zip, garbage, a pickle of other objects, ...
+        # torch's first sentence only (its advice is about weights_only=False: not wanted here).
+        first = (str(exc).strip().splitlines() or [""])[0].split(". ")[0][:160]
+        first = first or "the file ends too early"
+        raise ModelFileError(f"{path} is not a readable {what} ({type(exc).__name__}: {first}); "
+                             f"the file may be truncated or not a model at all: {fix}") from None
+    if not isinstance(blob, dict):
+        raise ModelFileError(f"{path} holds a {type(blob).__name__}, not a {what} (a dict with "
+                             f"keys {', '.join(keys)}): {fix}")
+    missing = [k for k in keys if k not in blob]
+    if missing:
+        raise ModelFileError(f"{path} is not a {what}: it lacks {', '.join(missing)} (has "
+                             f"{', '.join(map(str, blob)) or 'nothing'}; expected {', '.join(keys)}"
+                             f"): {fix}")
+    return blob
+
+
+def build_from_blob(path: Path, fix: str, build: Callable[[], torch.nn.Module],
+                    state_dict) -> torch.nn.Module:
+    """``build()`` the network a model file's config describes and load ``state_dict`` into it,
+    checking first that the file's tensors are exactly the network's (names and shapes), so a
+    mismatch is a ``ModelFileError`` that lists it rather than torch's long RuntimeError."""
+    try:
+        net = build()
+    except (TypeError, ValueError, KeyError) as exc:
+        raise ModelFileError(f"{path}: its network config does not describe a network of this "
+                             f"version of the pipeline ({type(exc).__name__}: {exc}): "
+                             f"{fix}") from None
+    if not isinstance(state_dict, dict) or not all(isinstance(v, torch.Tensor)
+                                                   for v in state_dict.values()):
+        raise ModelFileError(f"{path}: state_dict is not a dict of tensors: {fix}")
+    want = net.state_dict()
+    missing = [k for k in want if k not in state_dict]
+    unexpected = [k for k in state_dict if k not in want]
+    shapes = [f"{k}: file {tuple(state_dict[k].shape)}, network {tuple(want[k].shape)}"
+              for k in want if k in state_dict and state_dict[k].shape != want[k].shape]
+    problems = []
+    if missing:
+        problems.append(f"{len(missing)} tensor(s) missing (e.g. {', '.join(missing[:3])})")
+    if unexpected:
+        problems.append(f"{len(unexpected)} unexpected tensor(s) (e.g. "
+                        f"{', '.join(unexpected[:3])})")
+    if shapes:
+        problems.append(f"{len(shapes)} tensor(s) of another shape (e.g. {'; '.join(shapes[:2])})")
+    if problems:
+        cfg = getattr(net, "cfg", None)
+        raise ModelFileError(f"{path}: its weights do not fit the network its config describes "
+                             f"({cfg}): {', '.join(problems)}; the file comes from an "
+                             f"incompatible network or another version: {fix}")
+    try:
+        net.load_state_dict(state_dict)
+    except RuntimeError as exc:  # e.g. dtypes torch cannot copy
+        raise ModelFileError(f"{path}: its weights cannot be loaded ({str(exc)[:200]}): "
+                             f"{fix}") from None
+    return net
 
 
 def pick_device(requested: str = "auto") -> torch.device:
@@ -41,6 +135,7 @@ class Planner:
         self.net = net.to(self.device).eval()
         self.norm, self.ranking = norm, ranking
         self.size = net.cfg.input_size
+        self.last_reason = ""  # why the last ``plan`` returned [] (NO_GRASP_REASONS), else ""
 
     @classmethod
     def load(cls, model_dir: Path | str, device: str = "cpu") -> "Planner":
@@ -50,39 +145,77 @@ class Planner:
         if not path.is_file():
             raise FileNotFoundError(f"{path} not found: give a training artifact folder "
                                     "(models/train/<version>) made by `python -m pipeline.train`")
-        blob = torch.load(path, map_location="cpu", weights_only=True)
-        net = GraspNet(NetworkConfig(**blob["network"]))
-        net.load_state_dict(blob["state_dict"])
-        return cls(net, Normalisation(**blob["normalisation"]), RankingConfig(**blob["ranking"]),
-                   device)
+        what = "grasp planner model (model.pt of `python -m pipeline.train`)"
+        blob = read_model_file(path, MODEL_KEYS, what, RETRAIN_FIX)
+        net = build_from_blob(path, RETRAIN_FIX,
+                              lambda: GraspNet(NetworkConfig(**blob["network"])),
+                              blob["state_dict"])
+        try:
+            norm = Normalisation(**blob["normalisation"])
+            ranking = RankingConfig(**blob["ranking"])
+        except TypeError as exc:
+            raise ModelFileError(f"{path}: its normalisation/ranking config does not fit this "
+                                 f"version of the pipeline ({exc}): {RETRAIN_FIX}") from None
+        return cls(net, norm, ranking, device)
 
-    def _check(self, depth_m: np.ndarray) -> np.ndarray:
-        depth_m = np.asarray(depth_m)
-        if depth_m.dtype not in (np.float32, np.float64):
-            raise ValueError(f"depth must be float32/float64 metres, got dtype {depth_m.dtype} "
-                             "(convert a uint16 image with its depth unit first)")
-        if depth_m.ndim < 2 or depth_m.shape[-2:] != (self.size, self.size):
-            raise ValueError(f"depth must be (…, {self.size}, {self.size}) metres, got "
-                             f"{depth_m.shape}")
-        return depth_m.astype(np.float32)
+    def _check(self, depth_m: np.ndarray, batch: bool = True) -> np.ndarray:
+        """``check_depth_image``: (…, S, S) (or (S, S) without ``batch``) → float32 metres,
+        0 = no data (NaN, inf, ≤ 0, implausible depths)."""
+        return check_depth_image(depth_m, (self.size, self.size), allow_batch=batch,
+                                 name="depth_m", shape_source="the network's input size")
 
     @torch.no_grad()
     def predict(self, depth_m: np.ndarray) -> torch.Tensor:
-        """(B, H, W) or (H, W) depth, metres, 0 = no data → raw output (B, 2 + C, N, N), CPU."""
+        """(B, H, W) or (H, W) depth, metres, 0 = no data → raw output (B, 2 + C, N, N), CPU.
+
+        Bad values are sanitised and bad shapes/dtypes rejected as in ``plan``; an empty batch
+        (0, H, W) gives an empty (0, 2 + C, N, N) output."""
         depth_m = self._check(depth_m)
         batch = depth_m.reshape(-1, 1, self.size, self.size)
+        if batch.shape[0] == 0:
+            cfg = self.net.cfg
+            return torch.zeros((0, 2 + cfg.num_classes, cfg.grid, cfg.grid))
         x = torch.from_numpy(normalise_depth(batch, self.norm)).to(self.device)
         return self.net(x).float().cpu()
 
     def plan(self, depth_m: np.ndarray, intrinsics: Intrinsics) -> list[GraspCandidate]:
-        """One (H, W) depth image, metres → candidates sorted by J (Eq. 7), G_opt first."""
-        depth_m = self._check(depth_m)
-        if depth_m.ndim != 2:
-            raise ValueError(f"plan takes one (H, W) image, got {depth_m.shape}; use predict "
-                             "for batches")
+        """One (H, W) depth image, metres → candidates sorted by J (Eq. 7), G_opt first.
+
+        NaN, ±inf, ≤ 0 and implausible depths are no data (``check_depth_image``); a wrong
+        shape (also one that differs from ``intrinsics``), ndim or a non-float dtype raises a
+        ``ValueError``. Every candidate's nearest pixel has data. ``[]`` = no grasp, with the
+        reason in ``self.last_reason``: ``"no_valid_depth"`` (the image has no data at all: the
+        network is not run), ``"no_prediction"`` (no cell above th that is not NG, e.g. an empty
+        bin), ``"no_rankable_candidate"`` (every prediction lacked data or a normal).
+        """
+        depth_m = self._check(depth_m, batch=False)
+        if (intrinsics.height, intrinsics.width) != depth_m.shape:
+            raise ValueError(f"intrinsics are for {intrinsics.width} x {intrinsics.height} "
+                             f"images, the depth image is {depth_m.shape[1]} x "
+                             f"{depth_m.shape[0]}: pass the intrinsics of this image")
+        self.last_reason = ""
+        if not (depth_m > 0).any():
+            self.last_reason = NO_VALID_DEPTH
+            return []
         raw = self.predict(depth_m)[0]
         preds = decode_output(raw, threshold=self.ranking.threshold, image_size=self.size)
-        return rank_grasps(preds, depth_m, intrinsics, self.ranking)
+        # A (pathological) non-finite offset has no pixel: drop it before rounding.
+        preds = [p for p in preds if np.isfinite(p.u) and np.isfinite(p.v)]
+        if not any(p.probability > self.ranking.threshold and p.grasp_class != GraspClass.NG
+                   for p in preds):
+            self.last_reason = NO_PREDICTION
+            return []
+        ranked = [c for c in rank_grasps(preds, depth_m, intrinsics, self.ranking)
+                  if _has_data(depth_m, c.u, c.v)]
+        if not ranked:
+            self.last_reason = NO_RANKABLE_CANDIDATE
+        return ranked
+
+
+def _has_data(depth_m: np.ndarray, u: float, v: float) -> bool:
+    """Whether the pixel nearest (u, v) (as ``rank_grasps`` picks it) has depth data."""
+    H, W = depth_m.shape
+    return bool(depth_m[int(np.clip(round(v), 0, H - 1)), int(np.clip(round(u), 0, W - 1))] > 0)
 
 
 def ranking_config(cfg) -> RankingConfig:

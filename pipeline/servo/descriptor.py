@@ -7,7 +7,9 @@ n, axes n_l, n_s and their warped-perspective versions ñ_l, ñ_s for 2.5D visua
 
 Frames and units: camera frame OpenCV (x right, y down, z forward), metres; pixels (u, v) with
 u the column, v the row, (0, 0) the centre of the top-left pixel; ``depth_m`` is an (H, W)
-float z-depth in metres, 0 (or non-finite) = no data. Every normal is reported pointing
+float z-depth in metres, 0 (or non-finite) = no data; it goes through
+``pipeline.camera.depth_input.check_depth_image`` (NaN, ±inf, ≤ 0 and implausible depths are no
+data; a wrong shape or a non-float dtype is a ``ValueError``). Every normal is reported pointing
 *towards* the camera (n · P < 0), as everywhere in the project.
 
 The paper's rules, with P(u, v) the back-projection of pixel (u, v) (``camera.backproject``):
@@ -100,11 +102,15 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from pipeline.camera.depth_input import check_depth_image
 from pipeline.camera.geometry import Intrinsics
 from pipeline.labelling.hand import warped_axes
 from pipeline.labelling.surfaces import _fit_plane, _region_surface
 
 MIN_WINDOW_POINTS = 10
+# The reasons ``describe_surface`` gives for finding no surface (see its docstring).
+NO_SURFACE_REASONS = ("seed_outside_image", "no_depth_at_seed", "too_few_window_points",
+                      "no_region_at_seed", "region_too_small", "edge_on")
 
 
 @dataclass
@@ -297,16 +303,23 @@ def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
     docstring for the algorithm).
 
     Args:
-        depth_m: (H, W) float z-depth, metres; 0 or non-finite = no data.
+        depth_m: (H, W) float z-depth, metres; NaN, ±inf, ≤ 0 and implausible depths are no
+            data (``pipeline.camera.depth_input.check_depth_image``).
         intrinsics: of ``depth_m`` (its size must match).
         seed_uv: (2,) seed pixel g = (u, v), rounded to the nearest pixel.
         cfg: settings; defaults to ``DescriptorConfig()``.
 
     Returns:
         (features, "") when a surface is found, else (None, reason) with reason one of
-        ``"seed_outside_image"``, ``"no_depth_at_seed"``, ``"too_few_window_points"``,
+        ``NO_SURFACE_REASONS``: ``"seed_outside_image"`` (also a NaN/inf seed),
+        ``"no_depth_at_seed"`` (also an image with no data at all), ``"too_few_window_points"``,
         ``"no_region_at_seed"``, ``"region_too_small"``, ``"edge_on"`` (a region pixel's ray
         misses the plane).
+
+    Raises:
+        ValueError: a depth image of the wrong shape (not the intrinsics' (H, W)), ndim or
+            dtype (``DepthImageError``, e.g. a raw uint16 image: convert it to metres first), a
+            seed that is not two numbers, or a bad ``cfg.connectivity``.
 
     Cost: ~4 ms for a 416 × 416 image with a box face of ~15 000 pixels, ~20 ms when the face
     fills the image (see the module docstring).
@@ -315,21 +328,24 @@ def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
     if cfg.connectivity not in (4, 8):
         raise ValueError(f"connectivity must be 4 or 8, not {cfg.connectivity}")
     H, W = intrinsics.height, intrinsics.width
-    depth = np.asarray(depth_m)
-    if depth.shape != (H, W):
-        raise ValueError(f"depth image has shape {depth.shape}, expected (H, W) = ({H}, {W}) "
-                         "from the camera intrinsics")
-    u = int(round(float(seed_uv[0])))
-    v = int(round(float(seed_uv[1])))
+    # float32 metres, 0 = no data (NaN, ±inf, ≤ 0, implausible): a fresh array.
+    Z = check_depth_image(depth_m, (H, W), name="depth_m")
+    try:
+        seed = np.asarray(seed_uv, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        seed = np.zeros(0)
+    if seed.shape != (2,):
+        raise ValueError(f"seed_uv must be a pixel (u, v), got {seed_uv!r}")
+    if not (np.isfinite(seed).all() and -1 <= seed[0] <= W and -1 <= seed[1] <= H):
+        return None, "seed_outside_image"
+    u = int(round(float(seed[0])))
+    v = int(round(float(seed[1])))
     if not (0 <= u < W and 0 <= v < H):
         return None, "seed_outside_image"
 
     # Back-projection P = Z (xn, yn, 1), as camera.backproject; X = Z xn and Y = Z yn are only
     # formed where needed (the window, the crop).
-    Z = depth.astype(np.float32)
-    valid = np.isfinite(Z) & (Z > 0)
-    if not valid.all():
-        Z = np.where(valid, Z, np.float32(0.0))
+    valid = Z > 0
     if not valid[v, u]:
         return None, "no_depth_at_seed"
     xn = ((np.arange(W, dtype=np.float32) - np.float32(intrinsics.cx))
