@@ -30,6 +30,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
+import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -94,6 +95,9 @@ def make_planner(cfg, name: str, train_dir: str | None, baseline_dir: str | None
         th = cfg.evaluate.dcnn_threshold
         if th is not None:
             net.ranking = dataclasses.replace(net.ranking, threshold=float(th))
+        net.ranking = dataclasses.replace(
+            net.ranking, policy=str(cfg.evaluate.ranking_policy),
+            inclination_tie=math.radians(float(cfg.evaluate.inclination_tie_deg)))
         return lambda depth, intr, rng: net.plan(depth, intr)
     if name == "dexnet":
         from pipeline.dexnet.planner import DexNetPlanner

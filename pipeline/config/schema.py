@@ -340,6 +340,9 @@ class EvaluateConfig:
     stop_on_box_contact: bool = False  # True: touching any box but the target fails the attempt
     check_reachability: bool = True  # run-time robot-level check of the planned grasp
     max_candidates_checked: int = 10
+    ranking_policy: str = "paper"  # "paper" (Eq. 7) | "height_tiebreak" (Sec. 8.4's proposed fix)
+    inclination_tie_deg: float = 10.0  # height_tiebreak: inclinations closer than this tie
+    min_area_ratio: float = 0.0  # 0: off (paper); 1.2: Sec. 8.4's surface-area safety check
     train_version: str = "latest"
     baseline_version: str = "latest"
     num_trials: int = MISSING

@@ -197,6 +197,27 @@ class PickRunner:
                 return pattern
         return preferred
 
+    def _large_enough(self, frame: Frame, cands: list) -> list:
+        """With ``evaluate.min_area_ratio`` > 0 (paper Sec. 8.4's safety constraint), the DCNN's
+        candidates among the first ``max_candidates_checked`` whose surface (the descriptor's
+        region grown at the point) covers at least that ratio times the active cups' area
+        (one cup for L and R, two for B); the others are dropped."""
+        ratio = float(self.cfg.evaluate.min_area_ratio)
+        if ratio <= 0 or not cands or getattr(cands[0], "grasp_class", None) is None:
+            return cands
+        from pipeline.servo.descriptor import describe_surface
+
+        cup = math.pi * (float(self.cfg.hand.cup_diameter) / 2) ** 2
+        kept = []
+        for cand in cands[: int(self.cfg.evaluate.max_candidates_checked)]:
+            feats, _ = describe_surface(frame.depth_m, self.cell.intrinsics,
+                                        np.array([cand.u, cand.v], np.float64),
+                                        self.descriptor_cfg)
+            cups = 2 if cand.grasp_class.name == "B" else 1
+            if feats is not None and feats.area >= ratio * cups * cup:
+                kept.append(cand)
+        return kept
+
     def _first_reachable(self, frame: Frame, cands: list):
         """G_opt, or with ``evaluate.check_reachability`` the best-ranked of the DCNN's
         candidates whose target pose passes the robot-level check (the first one if none)."""
@@ -466,6 +487,7 @@ class PickRunner:
                 end = "bin_empty"
                 break
             frame, cands, planning_s = self.plan_at_home(rng_plan)
+            cands = self._large_enough(frame, cands)
             if not cands:
                 end = "no_grasp"
                 break

@@ -17,6 +17,17 @@ camera has φ = 0, a surface seen edge-on φ = π/2.
 
 **Depth I(g).** The depth of the pixel nearest g; if it has no data, the median valid depth of
 the window. A candidate with no valid depth or normal in its window is dropped.
+
+**Policies** (``RankingConfig.policy``):
+
+- ``"paper"``: sort by J (Eq. 7), ties by class probability. Any surface inclined by 30°–60°
+  (J_inclination ≥ 1/3) outranks every level one (J_distance is 0.07–0.3 in the bin), and among
+  inclined surfaces height plays no part.
+- ``"height_tiebreak"`` (the fix the paper proposes in Sec. 8.4 for Fig. 11, where a lower box
+  with a slightly smaller inclination was picked instead of the upper one): take the candidates
+  in the paper's order; when the best remaining one is inclined (φ ≥ π/6), every remaining
+  candidate whose φ differs from its φ by less than ``inclination_tie`` competes with it on
+  height, and the highest (largest J_distance) goes next. Repeat on the rest.
 """
 
 from __future__ import annotations
@@ -39,6 +50,11 @@ class RankingConfig:
     phi_switch: float = math.pi / 6  # Eq. 7's switch from J_distance to J_inclination, rad
     normal_half_window: int = 3  # h: the normal is averaged over (2h + 1)² pixels
     max_depth_jump: float = 0.02  # m; a larger depth step to a neighbour marks an edge
+    policy: str = "paper"  # "paper" | "height_tiebreak" (module docstring)
+    inclination_tie: float = math.radians(10.0)  # rad; "height_tiebreak": inclinations this close tie
+
+
+POLICIES = ("paper", "height_tiebreak")
 
 
 @dataclass
@@ -150,5 +166,22 @@ def rank_grasps(predictions: Sequence[GraspPrediction], depth_m: np.ndarray,
             probability=float(pred.probability), score=score, phi=phi, depth=depth,
             normal_cam=normal.astype(np.float32), j_distance=j_distance,
             j_inclination=j_inclination))
-    out.sort(key=lambda c: (-c.score, -c.probability))
+    return order_candidates(out, cfg)
+
+
+def order_candidates(cands: Sequence[GraspCandidate], cfg: RankingConfig) -> list[GraspCandidate]:
+    """The candidates in the order of ``cfg.policy`` (module docstring); G_opt first."""
+    if cfg.policy not in POLICIES:
+        raise ValueError(f"unknown ranking policy {cfg.policy!r}; choose one of {POLICIES}")
+    ranked = sorted(cands, key=lambda c: (-c.score, -c.probability))
+    if cfg.policy == "paper":
+        return ranked
+    out = []
+    while ranked:
+        best = ranked[0]
+        if best.phi >= cfg.phi_switch:
+            ties = [c for c in ranked if abs(c.phi - best.phi) < cfg.inclination_tie]
+            best = max(ties, key=lambda c: (c.j_distance, c.probability))  # first of equals
+        out.append(best)
+        ranked = [c for c in ranked if c is not best]
     return out
