@@ -6,6 +6,11 @@ versioned artifact described in ``pipeline.dataset.scenes``. Each scene depends 
 (base seed, split, index), and shards are fixed by ``generate.scenes_per_shard``, so the
 artifact is byte-identical whatever ``generate.workers`` is.
 
+Interrupted runs resume (``pipeline.artifacts.store``): a rerun of the same version keeps the
+shard files a killed run finished (rebuilding their summaries from the files) and simulates the
+rest; ``camera.json``, ``index.json`` and the logs are written again. The artifact equals an
+uninterrupted run's (the manifest's ``timings`` and ``created`` aside).
+
 Command line::
 
     python -m pipeline.generate experiment=smoke generate.num_scenes=200 generate.workers=2
@@ -30,7 +35,7 @@ from pipeline.camera.geometry import (
 )
 from pipeline.cli import CONF_DIR, data_root, stage_main
 from pipeline.dataset.scenes import SPLIT_CODES, SPLITS, SceneDataset
-from pipeline.dataset.storage import write_npz
+from pipeline.dataset.storage import read_npz, write_npz
 from pipeline.executor import log_quota, map_shards, resolve_workers
 from pipeline.simulation.scene import connect, scene_rng, simulate_scene
 from pipeline.tracking import StageLog, default_blueprint
@@ -146,6 +151,22 @@ def generate_shard(task: ShardTask) -> ShardSummary:
                         arrays["settle_steps"], arrays["settled"], time.perf_counter() - t0)
 
 
+def shard_from_file(task: ShardTask) -> ShardSummary | None:
+    """The summary of a shard an interrupted run already wrote (None if the file is missing,
+    unreadable or not this task's scenes): what ``generate_shard`` returned, from the file."""
+    path = Path(task.path)
+    if not path.is_file():
+        return None
+    try:
+        arrays = read_npz(path)  # reads every member: a damaged file fails its CRC check
+        ok = np.array_equal(arrays["scene_index"], np.arange(task.first, task.first + task.count))
+        summary = ShardSummary(task, arrays["num_boxes"], arrays["num_removed"],
+                               arrays["settle_steps"], arrays["settled"], 0.0)
+    except Exception:  # noqa: BLE001 - any unusable file is simply computed again
+        return None
+    return summary if ok else None
+
+
 def run_shards(tasks: list[ShardTask], cfg_obj, workers: int, progress: bool = True):
     """Yield each shard's summary in task order, computed by ``workers`` processes."""
     return map_shards(generate_shard, tasks, init=_init_worker, initargs=(cfg_obj,),
@@ -215,6 +236,18 @@ def generate(cfg: DictConfig) -> Path:
     workers = resolve_workers(cfg_obj.generate.workers, cfg_obj.executor)
 
     def body(run: StageRun) -> None:
+        tasks = plan_shards(cfg_obj.generate, run.work_dir)
+        done: dict[ShardTask, ShardSummary] = {}
+        if run.resumed:  # keep the finished shards of an interrupted run; redo everything else
+            run.keep_only(t.path for t in tasks)
+            for t in tasks:
+                summary = shard_from_file(t)
+                if summary is not None:
+                    done[t] = summary
+                else:
+                    Path(t.path).unlink(missing_ok=True)
+            print(f"[{STAGE}] resuming: {len(done)} of {len(tasks)} shards already written")
+
         intr = Intrinsics.from_config(cfg_obj.camera)
         T_world_cam = camera_pose_above_bin(cfg_obj.camera.height_above_bin_floor)
         (run.work_dir / "camera.json").write_text(json.dumps({
@@ -226,7 +259,6 @@ def generate(cfg: DictConfig) -> Path:
             "bin": OmegaConf.to_container(cfg.bin, resolve=True),
             "box_types": OmegaConf.to_container(cfg.boxes.types, resolve=True),
         }, indent=2) + "\n")
-        tasks = plan_shards(cfg_obj.generate, run.work_dir)
         index = {"splits": {s: [] for s in SPLITS}}
         for t in tasks:
             index["splits"][t.split].append({
@@ -235,11 +267,15 @@ def generate(cfg: DictConfig) -> Path:
         (run.work_dir / "index.json").write_text(json.dumps(index, indent=2) + "\n")
 
         t0 = time.perf_counter()
-        summaries = list(run_shards(tasks, cfg_obj, workers, cfg_obj.logging.progress))
+        todo = [t for t in tasks if t not in done]
+        done.update(zip(todo, list(run_shards(todo, cfg_obj, workers, cfg_obj.logging.progress))))
+        summaries = [done[t] for t in tasks]
         run.timings["simulate_s"] = round(time.perf_counter() - t0, 3)
         run.timings["workers"] = workers
-        n_total = sum(sizes.values())
-        run.timings["scenes_per_s"] = round(n_total / max(run.timings["simulate_s"], 1e-9), 3)
+        n_simulated = sum(t.count for t in todo)
+        run.timings["scenes_per_s"] = round(n_simulated / max(run.timings["simulate_s"], 1e-9), 3)
+        if run.resumed:
+            run.timings["shards_resumed"] = len(tasks) - len(todo)
 
         t1 = time.perf_counter()
         quota = log_quota(sizes, cfg_obj.logging.max_logged_scenes)
@@ -257,7 +293,7 @@ def generate(cfg: DictConfig) -> Path:
         run.metrics["logged_scenes"] = log_index
 
     return run_stage(data_root(cfg), STAGE, version, config, {}, body,
-                     seed=cfg_obj.seed, force=cfg_obj.generate.force)
+                     seed=cfg_obj.seed, force=cfg_obj.generate.force, resumable=True)
 
 
 @hydra.main(config_path=CONF_DIR, config_name="generate", version_base="1.3")

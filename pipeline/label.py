@@ -18,6 +18,9 @@ simulator's box poses; the accuracy goes into the manifest.
 
 Artifact (``data/label/<version>/``): ``labels/<split>-<shard>.npz`` aligned with the
 generation shards, one row per grasp point (see ``LABEL_FIELDS``), plus ``log.rrd``/``log.mcap``.
+Interrupted runs resume (``pipeline.artifacts.store``): a rerun keeps the label shards a killed
+run finished, rebuilding their summaries from the files and from each shard's accuracy records
+(kept in the work folder's ``.resume/``, not in the artifact), and labels the rest.
 
     python -m pipeline.label experiment=smoke [label.generate_version=<version>] [label.robot_checks=false]
 """
@@ -26,6 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -84,6 +88,7 @@ class LabelTask:
     first: int
     count: int
     out_path: str
+    state_path: str = ""  # resume data: the shard's accuracy records (not in the artifact)
 
 
 @dataclass
@@ -195,19 +200,62 @@ def label_shard(task: LabelTask) -> LabelSummary:
                 summary.reasons[name] = summary.reasons.get(name, 0) + 1
     arrays = {k: np.concatenate(v) for k, v in cols.items()}
     arrays["points_per_scene"] = np.asarray(per_scene, np.int32)
+    if task.state_path:  # before the shard: a shard file that exists has its records
+        state = Path(task.state_path)
+        state.parent.mkdir(parents=True, exist_ok=True)
+        tmp = state.with_name(state.name + ".part")
+        tmp.write_text(json.dumps({"matches": summary.matches}, default=_plain))
+        os.replace(tmp, state)
     Path(task.out_path).parent.mkdir(parents=True, exist_ok=True)
     write_npz(Path(task.out_path), arrays)
     return summary
 
 
-def plan_tasks(gen_dir: Path, out_dir: Path) -> list[LabelTask]:
+def _plain(value):
+    """JSON for numpy scalars in accuracy records (floats round-trip exactly through JSON)."""
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"{type(value).__name__} is not JSON serialisable")
+
+
+def shard_from_file(task: LabelTask) -> LabelSummary | None:
+    """The summary of a shard an interrupted run already wrote, from its label file and its
+    accuracy records (``task.state_path``): what ``label_shard`` returned, timings aside. None
+    when either is missing, unreadable or not this task's scenes."""
+    out, state = Path(task.out_path), Path(task.state_path) if task.state_path else None
+    if state is None or not out.is_file() or not state.is_file():
+        return None
+    try:
+        arrays = read_npz(out)  # reads every member: a damaged file fails its CRC check
+        matches = json.loads(state.read_text())["matches"]
+        per_scene = arrays["points_per_scene"]
+        scenes = np.repeat(np.arange(task.first, task.first + task.count), per_scene)
+        if (len(matches) != task.count or len(per_scene) != task.count
+                or not np.array_equal(arrays["scene_index"], scenes)):
+            return None
+        summary = LabelSummary(task, matches=matches)
+        summary.hand_counts += np.bincount(arrays["hand_class"], minlength=4)
+        summary.final_counts += np.bincount(arrays["grasp_class"], minlength=4)
+        for code in arrays["ng_reason"]:
+            if code:
+                name = NG_REASONS[code]
+                summary.reasons[name] = summary.reasons.get(name, 0) + 1
+    except Exception:  # noqa: BLE001 - any unusable file is simply computed again
+        return None
+    return summary
+
+
+def plan_tasks(gen_dir: Path, out_dir: Path, state_dir: Path | None = None) -> list[LabelTask]:
+    """One task per generation shard, writing ``out_dir/labels/<name>`` (and, with
+    ``state_dir``, its resume data ``state_dir/labels/<name>.json``)."""
     index = json.loads((gen_dir / "index.json").read_text())
     tasks = []
     for split in SPLITS:
         for shard in index["splits"][split]:
             name = artifact_file(gen_dir, shard["file"]).name  # ArtifactError if outside
+            state = str(state_dir / "labels" / f"{name}.json") if state_dir is not None else ""
             tasks.append(LabelTask(split, shard["file"], shard["first"], shard["count"],
-                                   str(out_dir / "labels" / name)))
+                                   str(out_dir / "labels" / name), state))
     return tasks
 
 
@@ -313,7 +361,17 @@ def label(cfg: DictConfig) -> Path:
     workers = resolve_workers(cfg_obj.label.workers, cfg_obj.executor)
 
     def body(run: StageRun) -> None:
-        tasks = plan_tasks(gen_dir, run.work_dir)
+        tasks = plan_tasks(gen_dir, run.work_dir, run.state_dir)
+        done: dict[LabelTask, LabelSummary] = {}
+        if run.resumed:  # keep the finished shards of an interrupted run; redo everything else
+            run.keep_only([p for t in tasks for p in (t.out_path, t.state_path)])
+            for t in tasks:
+                summary = shard_from_file(t)
+                if summary is not None:
+                    done[t] = summary
+                else:
+                    Path(t.out_path).unlink(missing_ok=True)
+            print(f"[{STAGE}] resuming: {len(done)} of {len(tasks)} shards already written")
         meta = {"splits": {s: [] for s in SPLITS}, "fields": LABEL_FIELDS,
                 "classes": [c.name for c in GraspClass], "ng_reasons": list(NG_REASONS)}
         for t in tasks:
@@ -322,9 +380,12 @@ def label(cfg: DictConfig) -> Path:
                 "first": t.first, "count": t.count})
         (run.work_dir / "labels.json").write_text(json.dumps(meta, indent=2) + "\n")
         t0 = time.perf_counter()
-        summaries = list(run_tasks(tasks, cfg_obj, gen_dir, workers, cfg_obj.logging.progress))
+        todo = [t for t in tasks if t not in done]
+        done.update(zip(todo, list(run_tasks(todo, cfg_obj, gen_dir, workers,
+                                             cfg_obj.logging.progress))))
+        summaries = [done[t] for t in tasks]
         elapsed = time.perf_counter() - t0
-        n_scenes = sum(t.count for t in tasks)
+        n_scenes = sum(t.count for t in todo)  # labelled by this run
         run.timings.update({
             "label_s": round(elapsed, 3), "workers": workers,
             "scenes_per_s": round(n_scenes / max(elapsed, 1e-9), 3),
@@ -333,6 +394,8 @@ def label(cfg: DictConfig) -> Path:
             "robot_checks_s_per_scene": round(
                 sum(s.robot_s for s in summaries) / max(n_scenes, 1), 5),
         })
+        if run.resumed:
+            run.timings["shards_resumed"] = len(tasks) - len(todo)
         metrics: dict = {"splits": {}}
         for split in SPLITS:
             ss = [s for s in summaries if s.task.split == split]
@@ -371,7 +434,7 @@ def label(cfg: DictConfig) -> Path:
         run.metrics["logged_scenes"] = log_index
 
     return run_stage(data_root(cfg), STAGE, version, config, {"generate": gen_dir.name}, body,
-                     seed=cfg_obj.seed, force=cfg_obj.label.force)
+                     seed=cfg_obj.seed, force=cfg_obj.label.force, resumable=True)
 
 
 @hydra.main(config_path=CONF_DIR, config_name="label", version_base="1.3")

@@ -50,6 +50,7 @@ import math
 import os
 import pickle
 import re
+import sys
 import time
 from pathlib import Path
 
@@ -107,10 +108,21 @@ def epoch_order(n: int, seed: int, epoch: int, flip: str) -> tuple[list[int], li
     return order, [choices[k] for k in picks]
 
 
+def _interned(obj):
+    """``obj`` with every dict key string interned. Pickle shares equal strings by identity, so
+    otherwise a checkpoint's bytes would depend on whether its optimiser state and history were
+    built in this process or loaded from a checkpoint (a resumed run)."""
+    if isinstance(obj, dict):
+        return {sys.intern(k) if type(k) is str else k: _interned(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_interned(v) for v in obj]
+    return obj
+
+
 def _save_atomic(obj, path: Path) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".part")
-    torch.save(obj, tmp)
+    torch.save(_interned(obj), tmp)
     os.replace(tmp, path)
 
 

@@ -1,35 +1,81 @@
-"""Atomic, versioned artifact folders and their manifests.
+"""Atomic, versioned artifact folders and their manifests; interrupted runs resume.
 
-Write protocol (``ArtifactWriter``):
+Write protocol (``ArtifactWriter``, used through ``run_stage``):
 
-1. The stage writes every file into ``<stage_dir>/.tmp-<version>-<random>/``.
-2. When the stage function returns, ``manifest.json`` is written there last, with the sha256 and
+1. The run takes an exclusive lock on ``<stage_dir>/.lock-<version>`` (``fcntl.flock``,
+   non-blocking; the file holds the owner's pid). If another live process holds it, the run
+   fails at once with an ``ArtifactError`` naming that pid. The kernel drops the lock of a
+   killed process, so after ``kill -9`` the next run takes it. Processes forked while the lock
+   is held (the stage's worker pool) inherit it and are set to die with the process that forked
+   them (Linux ``PR_SET_PDEATHSIG``): a killed stage leaves no orphaned worker still writing
+   into its folder (a fork ``multiprocessing`` pool worker would otherwise finish its shard
+   after the kill), and no new run starts until they are gone (a run finding the lock held for
+   a dead pid waits up to ``LOCK_GRACE_S`` for them). Ray actors (``executor=ray``) are not
+   forked from the stage and not covered: Ray ends a dead driver's actors itself, not
+   necessarily before a rerun starts.
+2. The stage writes every file into the work folder ``<stage_dir>/.tmp-<version>/``, named by
+   the version alone, so a rerun of the same version finds what a killed run left:
+
+   * ``run_stage(..., resumable=True)`` (generation, labelling): the files are kept and
+     ``run.resumed`` is true. The stage keeps the shard files it can use (they are written
+     atomically, ``pipeline.dataset.storage.write_npz``: a shard that exists is complete),
+     deletes everything else (``StageRun.keep_only``: partial ``.part`` files, logs, indexes)
+     and computes the rest, so the artifact equals an uninterrupted run's except for the
+     volatile manifest fields (``timings``, ``created``). Stage-private resume data (e.g. the
+     labelling's per-shard accuracy records) go to ``run.state_dir`` (``.resume/`` in the work
+     folder), which is deleted before the manifest is written: it is never part of the
+     artifact. ``KeyboardInterrupt`` (Ctrl-C) keeps the folder too; an error (any
+     ``Exception``) deletes it, as for every stage: a failed run leaves nothing behind.
+     ``timings.shards_resumed`` says how many shards a resumed run kept.
+   * otherwise (the default; training, which resumes from its own checkpoints) the folder is
+     emptied first, and deleted when the stage raises.
+   * ``force=true`` always starts from an empty work folder.
+3. When the stage function returns, ``manifest.json`` is written there last, with the sha256 and
    size of every file.
-3. The folder is renamed to ``<stage_dir>/<version>/`` (a single ``rename``; with ``force=true``
-   the old folder is first moved aside and deleted only after the rename succeeded).
-4. ``<stage_dir>/latest`` is re-pointed (symlink written under a temporary name, then renamed).
+4. The folder is renamed to ``<stage_dir>/<version>/`` (a single ``rename``; with ``force=true``
+   the old folder is first moved aside to ``.tmp-old-<version>-<random>`` and deleted only after
+   the rename succeeded).
+5. ``<stage_dir>/latest`` is re-pointed (symlink written under a temporary name, then renamed),
+   and the lock is released (its file removed while still locked, so a waiting process that
+   locked the removed file notices and starts over on a new one).
 
-A crash or exception at any point leaves at most a ``.tmp-*`` folder, which is never read and
-is removed by the next run of the stage. A folder without ``manifest.json`` is not an artifact.
+A crash, ``kill -9`` or exception at any point leaves at most ``.tmp-*`` folders and a lock
+file (until the next run of that version), never read by any reader: ``resolve_artifact`` accepts only ``<stage_dir>/<version>/``
+holding ``manifest.json``, version names cannot start with ``.``, and ``latest`` is re-pointed
+only after the rename. A folder without ``manifest.json`` is not an artifact. Cleanup when a run
+starts: random-named ``.tmp-*`` entries (moved-aside old versions, ``latest`` symlinks, work
+folders of older code) are removed after an hour; the resumable work folder of another version
+is kept for a rerun of that version unless nobody holds its lock and it is older than
+``RESUME_KEEP_S`` (a week).
 """
 
 from __future__ import annotations
 
 import datetime as _dt
+import errno
+import fcntl
 import json
 import os
+import re
 import shutil
+import sys
 import time
 import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Iterable, Mapping
 
 from pipeline.artifacts.fingerprint import git_state, package_versions, sha256_file, source_hash
 
 MANIFEST = "manifest.json"
 LATEST = "latest"
 TMP_PREFIX = ".tmp-"
+LOCK_PREFIX = ".lock-"
+STATE_DIR = ".resume"  # inside the work folder: resume data, never part of the artifact
+STALE_TMP_S = 3600.0  # random-named .tmp-* entries older than this are removed
+RESUME_KEEP_S = 7 * 24 * 3600.0  # unlocked work folders of other versions older than this too
+LOCK_GRACE_S = 10.0  # how long to wait for the workers of a killed run to exit
+_RANDOM_TMP = re.compile(r"^\.tmp-.+-[0-9a-f]{8}$")  # .tmp-<version>-<random>, old-, latest-
 
 
 class ArtifactError(RuntimeError):
@@ -43,10 +89,13 @@ class StageRun:
     Attributes:
         stage: stage name (``"generate"``, ...).
         version: the artifact's version key.
-        work_dir: temporary folder to write every output file into.
+        work_dir: work folder to write every output file into (``.tmp-<version>``).
         final_dir: where the artifact will live once complete (do not write there).
         metrics: filled by the stage; stored in the manifest.
         timings: seconds per phase, filled by the stage; stored in the manifest.
+        resumable: the stage keeps finished work of an interrupted run (``run_stage``).
+        resumed: ``work_dir`` holds what an interrupted run of this version left (resumable
+            stages only): keep the usable files (``keep_only``), compute the rest.
     """
 
     stage: str
@@ -58,6 +107,27 @@ class StageRun:
     seed: int | None
     metrics: dict[str, Any] = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
+    resumable: bool = False
+    resumed: bool = False
+
+    @property
+    def state_dir(self) -> Path:
+        """Folder for resume data (``work_dir/.resume``), deleted before the manifest."""
+        return self.work_dir / STATE_DIR
+
+    def keep_only(self, keep: Iterable[Path | str]) -> list[Path]:
+        """Delete every file of the work folder except those in ``keep`` (absolute paths);
+        returns the kept files that exist."""
+        keep = {Path(p).resolve() for p in keep}
+        kept = []
+        for path in sorted(self.work_dir.rglob("*")):
+            if path.is_dir() and not path.is_symlink():
+                continue
+            if path.resolve() in keep:
+                kept.append(path)
+            else:
+                path.unlink(missing_ok=True)
+        return kept
 
 
 def _now_iso() -> str:
@@ -80,23 +150,167 @@ def _point_latest(stage_dir: Path, version: str) -> None:
     os.replace(tmp, stage_dir / LATEST)
 
 
-def _remove_stale_tmp(stage_dir: Path, max_age_s: float = 0.0) -> None:
-    """Remove temporary folders left by interrupted runs (older than ``max_age_s``)."""
+# ----------------------------------------------------------------------------- locking
+
+_HELD_LOCKS: set[int] = set()  # lock file descriptors this process holds
+_FORK_PARENT = 0
+
+
+def _before_fork() -> None:
+    global _FORK_PARENT
+    _FORK_PARENT = os.getpid()
+
+
+def _prctl():
+    """libc's ``prctl`` (Linux), looked up in the parent so that a forked child only calls it."""
+    global _PRCTL
+    if _PRCTL is None and sys.platform.startswith("linux"):
+        try:
+            import ctypes
+
+            _PRCTL = ctypes.CDLL(None, use_errno=True).prctl
+        except (OSError, AttributeError):  # pragma: no cover
+            _PRCTL = False
+    return _PRCTL
+
+
+_PRCTL = None
+
+
+def _after_fork_in_child() -> None:
+    """A process forked while a stage lock is held (a worker of the stage) dies with its
+    parent: after ``kill -9`` of the stage, no orphan keeps writing into the work folder."""
+    if not _HELD_LOCKS or not _PRCTL:
+        return
+    _PRCTL(1, 9)  # PR_SET_PDEATHSIG, SIGKILL
+    if os.getppid() != _FORK_PARENT:  # the parent died before prctl took effect
+        os._exit(1)
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(before=_before_fork, after_in_child=_after_fork_in_child)
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+class _VersionLock:
+    """Exclusive, non-blocking ``flock`` on ``<stage_dir>/.lock-<version>`` (module docstring)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.fd: int | None = None
+
+    def try_acquire(self) -> bool:
+        while True:
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError as e:
+                os.close(fd)
+                if e.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                    return False
+                raise
+            try:
+                st = os.stat(self.path)
+            except FileNotFoundError:
+                st = None
+            mine = os.fstat(fd)
+            if st is not None and (st.st_ino, st.st_dev) == (mine.st_ino, mine.st_dev):
+                os.ftruncate(fd, 0)
+                os.write(fd, f"{os.getpid()}\n".encode())
+                self.fd = fd
+                _prctl()
+                _HELD_LOCKS.add(fd)
+                return True
+            os.close(fd)  # its holder removed the file after we opened it: lock the new one
+
+    def holder(self) -> int | None:
+        try:
+            return int(self.path.read_text().strip())
+        except (OSError, ValueError):
+            return None
+
+    def release(self) -> None:
+        if self.fd is None:
+            return
+        fd, self.fd = self.fd, None
+        _HELD_LOCKS.discard(fd)
+        try:
+            self.path.unlink(missing_ok=True)
+        finally:
+            fcntl.flock(fd, fcntl.LOCK_UN)
+            os.close(fd)
+
+
+def _lock_version(stage_dir: Path, stage: str, version: str, work_dir: Path) -> _VersionLock:
+    """The version's lock, or ArtifactError when another live run of it holds the lock."""
+    lock = _VersionLock(stage_dir / f"{LOCK_PREFIX}{version}")
+    deadline = time.monotonic() + LOCK_GRACE_S
+    while not lock.try_acquire():
+        pid = lock.holder()
+        if pid is not None and not _pid_alive(pid) and time.monotonic() < deadline:
+            time.sleep(0.1)  # a killed run's forked workers are still exiting
+            continue
+        if pid is None or _pid_alive(pid):
+            who = f"pid {pid}" if pid is not None else "another process"
+            fix = (f"wait for it to finish, or stop it (`kill {pid}`) and run the stage again"
+                   if pid is not None else "wait for it to finish")
+        else:
+            who = (f"pid {pid} has exited, but processes it started still hold the lock "
+                   f"`{lock.path}`")
+            fix = f"stop them (`fuser -k {lock.path}`) and run the stage again"
+        raise ArtifactError(
+            f"[{stage}] another run of {stage} {version} is writing {work_dir} ({who}); {fix}."
+            " A run killed part-way resumes where it stopped.")
+    return lock
+
+
+def _remove_path(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        path.unlink(missing_ok=True)
+
+
+def _remove_stale_tmp(stage_dir: Path, current: str) -> None:
+    """Remove what interrupted runs left, except what a live run or a rerun may still use
+    (module docstring): called with the lock of version ``current`` held."""
     now = time.time()
     for path in stage_dir.glob(f"{TMP_PREFIX}*"):
         try:
-            if now - path.lstat().st_mtime < max_age_s:
-                continue
-            if path.is_dir() and not path.is_symlink():
-                shutil.rmtree(path, ignore_errors=True)
-            else:
-                path.unlink(missing_ok=True)
+            age = now - path.lstat().st_mtime
+            if path.name.startswith(f"{TMP_PREFIX}old-{current}-"):
+                _remove_path(path)  # ours: left by a run of this version killed while swapping
+            elif _RANDOM_TMP.match(path.name) or not path.is_dir() or path.is_symlink():
+                if age >= STALE_TMP_S:  # a concurrent run of older code may still write there
+                    _remove_path(path)
+            elif path.name != f"{TMP_PREFIX}{current}" and age >= RESUME_KEEP_S:
+                other = path.name[len(TMP_PREFIX):]
+                lock = _VersionLock(stage_dir / f"{LOCK_PREFIX}{other}")
+                if lock.try_acquire():  # nobody is writing there
+                    try:
+                        _remove_path(path)
+                    finally:
+                        lock.release()
         except FileNotFoundError:
             pass
 
 
 class ArtifactWriter:
-    """Create one artifact atomically. See the module docstring for the protocol."""
+    """Create one artifact atomically. See the module docstring for the protocol.
+
+    ``resumable``: keep what an interrupted run of this version left in the work folder
+    (``run.resumed``), and keep the folder when the stage is interrupted (``KeyboardInterrupt``;
+    an error deletes it). ``force``: start from an empty work folder even so.
+    """
 
     def __init__(
         self,
@@ -106,42 +320,84 @@ class ArtifactWriter:
         config: Mapping[str, Any],
         upstream: Mapping[str, str],
         seed: int | None = None,
+        *,
+        resumable: bool = False,
+        force: bool = False,
     ) -> None:
         self.stage_dir = Path(data_root) / stage
+        self.force = force
+        self._lock: _VersionLock | None = None
         self.run = StageRun(
             stage=stage,
             version=version,
-            work_dir=self.stage_dir / f"{TMP_PREFIX}{version}-{uuid.uuid4().hex[:8]}",
+            work_dir=self.stage_dir / f"{TMP_PREFIX}{version}",
             final_dir=self.stage_dir / version,
             config=dict(config),
             upstream=dict(upstream),
             seed=seed,
+            resumable=resumable,
         )
 
     def exists(self) -> bool:
         return (self.run.final_dir / MANIFEST).is_file()
 
     def __enter__(self) -> StageRun:
+        run = self.run
         self.stage_dir.mkdir(parents=True, exist_ok=True)
-        # Only folders older than an hour: a concurrent run of the same stage may be writing.
-        _remove_stale_tmp(self.stage_dir, max_age_s=3600.0)
-        self.run.work_dir.mkdir()
+        self._lock = _lock_version(self.stage_dir, run.stage, run.version, run.work_dir)
+        try:
+            _remove_stale_tmp(self.stage_dir, run.version)
+            work = run.work_dir
+            if work.is_symlink() or (work.exists() and not work.is_dir()):
+                work.unlink()
+            if work.is_dir() and (self.force or not run.resumable):
+                shutil.rmtree(work)
+            run.resumed = work.is_dir()
+            if run.resumed:  # a killed run may have written its manifest: not valid any more
+                for name in (MANIFEST, MANIFEST + ".part"):
+                    (work / name).unlink(missing_ok=True)
+            work.mkdir(exist_ok=True)
+        except BaseException:
+            self._release()
+            raise
         self._t0 = time.perf_counter()
-        return self.run
+        return run
+
+    def _release(self) -> None:
+        if self._lock is not None:
+            self._lock.release()
+            self._lock = None
+
+    def _discard(self, exc: BaseException | None) -> None:
+        """After a failure: a resumable stage interrupted (Ctrl-C) keeps its work folder;
+        otherwise, and on any error, it is deleted (a failed run leaves nothing behind)."""
+        if not (self.run.resumable and exc is not None and not isinstance(exc, Exception)):
+            shutil.rmtree(self.run.work_dir, ignore_errors=True)
+
+    def abandon(self) -> None:
+        """Write nothing on exit (the artifact appeared meanwhile): the work folder is removed."""
+        self._abandoned = True
 
     def __exit__(self, exc_type, exc, tb) -> bool:
-        if exc_type is not None:
-            shutil.rmtree(self.run.work_dir, ignore_errors=True)
-            return False
         try:
-            self._finish()
-        except BaseException:
-            shutil.rmtree(self.run.work_dir, ignore_errors=True)
-            raise
-        return False
+            if getattr(self, "_abandoned", False):
+                shutil.rmtree(self.run.work_dir, ignore_errors=True)
+                return False
+            if exc_type is not None:
+                self._discard(exc)
+                return False
+            try:
+                self._finish()
+            except BaseException as e:
+                self._discard(e)
+                raise
+            return False
+        finally:
+            self._release()
 
     def _finish(self) -> None:
         run = self.run
+        shutil.rmtree(run.state_dir, ignore_errors=True)
         run.timings.setdefault("total_s", round(time.perf_counter() - self._t0, 3))
         manifest = {
             "stage": run.stage,
@@ -190,21 +446,40 @@ def run_stage(
     *,
     seed: int | None = None,
     force: bool = False,
+    resumable: bool = False,
     say: Callable[[str], None] = print,
 ) -> Path:
     """Produce the artifact ``<data_root>/<stage>/<version>`` with ``body`` unless it exists.
 
     Returns the artifact folder. An existing, complete artifact is reused (and ``latest`` is
-    pointed at it) unless ``force`` is true.
+    pointed at it) unless ``force`` is true. ``resumable``: ``body`` can resume the work of an
+    interrupted run (``StageRun.resumed``; module docstring).
+
+    Raises:
+        ArtifactError: another live process is writing this version.
     """
-    writer = ArtifactWriter(data_root, stage, version, config, upstream, seed)
-    if writer.exists() and not force:
+    writer = ArtifactWriter(data_root, stage, version, config, upstream, seed,
+                            resumable=resumable, force=force)
+
+    def reuse() -> Path:
         _point_latest(writer.stage_dir, version)
         say(f"[{stage}] version {version} already exists at {writer.run.final_dir}: reusing it "
             f"(pass {stage}.force=true to recompute).")
         return writer.run.final_dir
+
+    if writer.exists() and not force:
+        return reuse()
     with writer as run:
-        body(run)
+        if writer.exists() and not force:  # a concurrent run finished it meanwhile
+            writer.abandon()
+            return reuse()
+        try:
+            body(run)
+        except BaseException as e:
+            if resumable and not isinstance(e, Exception):
+                say(f"[{stage}] interrupted: the finished work is kept in {run.work_dir}; run "
+                    "the stage again with the same settings to resume.")
+            raise
     say(f"[{stage}] wrote version {version} to {run.final_dir}")
     return run.final_dir
 
