@@ -237,16 +237,9 @@ def generate(cfg: DictConfig) -> Path:
 
     def body(run: StageRun) -> None:
         tasks = plan_shards(cfg_obj.generate, run.work_dir)
-        done: dict[ShardTask, ShardSummary] = {}
-        if run.resumed:  # keep the finished shards of an interrupted run; redo everything else
-            run.keep_only(t.path for t in tasks)
-            for t in tasks:
-                summary = shard_from_file(t)
-                if summary is not None:
-                    done[t] = summary
-                else:
-                    Path(t.path).unlink(missing_ok=True)
-            print(f"[{STAGE}] resuming: {len(done)} of {len(tasks)} shards already written")
+        # an interrupted run's finished shards are kept; everything else is redone
+        done: dict[ShardTask, ShardSummary] = run.finished_shards(
+            tasks, [t.path for t in tasks], shard_from_file, lambda t: t.path)
 
         intr = Intrinsics.from_config(cfg_obj.camera)
         T_world_cam = camera_pose_above_bin(cfg_obj.camera.height_above_bin_floor)

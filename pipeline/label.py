@@ -192,12 +192,7 @@ def label_shard(task: LabelTask) -> LabelSummary:
         for k, v in rows.items():
             cols.setdefault(k, []).append(v)
         per_scene.append(len(rows["instance"]))
-        summary.hand_counts += np.bincount(rows["hand_class"], minlength=4)
-        summary.final_counts += np.bincount(rows["grasp_class"], minlength=4)
-        for code in rows["ng_reason"]:
-            if code:
-                name = NG_REASONS[code]
-                summary.reasons[name] = summary.reasons.get(name, 0) + 1
+        _count_classes(summary, rows)
     arrays = {k: np.concatenate(v) for k, v in cols.items()}
     arrays["points_per_scene"] = np.asarray(per_scene, np.int32)
     if task.state_path:  # before the shard: a shard file that exists has its records
@@ -209,6 +204,16 @@ def label_shard(task: LabelTask) -> LabelSummary:
     Path(task.out_path).parent.mkdir(parents=True, exist_ok=True)
     write_npz(Path(task.out_path), arrays)
     return summary
+
+
+def _count_classes(summary: LabelSummary, rows: dict[str, np.ndarray]) -> None:
+    """Add grasp points' hand-level and final classes and NG reasons to ``summary``."""
+    summary.hand_counts += np.bincount(rows["hand_class"], minlength=4)
+    summary.final_counts += np.bincount(rows["grasp_class"], minlength=4)
+    for code in rows["ng_reason"]:
+        if code:
+            name = NG_REASONS[code]
+            summary.reasons[name] = summary.reasons.get(name, 0) + 1
 
 
 def _plain(value):
@@ -234,12 +239,7 @@ def shard_from_file(task: LabelTask) -> LabelSummary | None:
                 or not np.array_equal(arrays["scene_index"], scenes)):
             return None
         summary = LabelSummary(task, matches=matches)
-        summary.hand_counts += np.bincount(arrays["hand_class"], minlength=4)
-        summary.final_counts += np.bincount(arrays["grasp_class"], minlength=4)
-        for code in arrays["ng_reason"]:
-            if code:
-                name = NG_REASONS[code]
-                summary.reasons[name] = summary.reasons.get(name, 0) + 1
+        _count_classes(summary, arrays)
     except Exception:  # noqa: BLE001 - any unusable file is simply computed again
         return None
     return summary
@@ -362,16 +362,10 @@ def label(cfg: DictConfig) -> Path:
 
     def body(run: StageRun) -> None:
         tasks = plan_tasks(gen_dir, run.work_dir, run.state_dir)
-        done: dict[LabelTask, LabelSummary] = {}
-        if run.resumed:  # keep the finished shards of an interrupted run; redo everything else
-            run.keep_only([p for t in tasks for p in (t.out_path, t.state_path)])
-            for t in tasks:
-                summary = shard_from_file(t)
-                if summary is not None:
-                    done[t] = summary
-                else:
-                    Path(t.out_path).unlink(missing_ok=True)
-            print(f"[{STAGE}] resuming: {len(done)} of {len(tasks)} shards already written")
+        # an interrupted run's finished shards are kept; everything else is redone
+        done: dict[LabelTask, LabelSummary] = run.finished_shards(
+            tasks, [p for t in tasks for p in (t.out_path, t.state_path)], shard_from_file,
+            lambda t: t.out_path)
         meta = {"splits": {s: [] for s in SPLITS}, "fields": LABEL_FIELDS,
                 "classes": [c.name for c in GraspClass], "ng_reasons": list(NG_REASONS)}
         for t in tasks:

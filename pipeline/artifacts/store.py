@@ -63,10 +63,12 @@ import time
 import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable, Mapping
+from typing import Any, Callable, Iterable, Mapping, Sequence, TypeVar
 
 from pipeline.artifacts.fingerprint import git_state, package_versions, sha256_file, source_hash
 
+T = TypeVar("T")
+S = TypeVar("S")
 MANIFEST = "manifest.json"
 LATEST = "latest"
 TMP_PREFIX = ".tmp-"
@@ -128,6 +130,26 @@ class StageRun:
             else:
                 path.unlink(missing_ok=True)
         return kept
+
+    def finished_shards(self, tasks: Sequence[T], keep: Iterable[Path | str],
+                        from_file: Callable[[T], S | None],
+                        output: Callable[[T], Path | str]) -> dict[T, S]:
+        """The shards an interrupted run of this version finished: ``{task: from_file(task)}``
+        for every task whose output file is usable (``from_file`` re-reads and checks it, None
+        when it cannot be used). Everything else in the work folder but ``keep`` is deleted,
+        and so is an unusable output file. Empty unless ``resumed``."""
+        if not self.resumed:
+            return {}
+        self.keep_only(keep)
+        done = {}
+        for task in tasks:
+            summary = from_file(task)
+            if summary is not None:
+                done[task] = summary
+            else:
+                Path(output(task)).unlink(missing_ok=True)
+        print(f"[{self.stage}] resuming: {len(done)} of {len(tasks)} shards already written")
+        return done
 
 
 def _now_iso() -> str:
