@@ -232,6 +232,18 @@ def executor_figures(num_scenes: int, num_tasks: int = 200) -> dict[str, float]:
     return out
 
 
+def bench_scenes(cfg, num_images: int) -> list:
+    """``num_images`` simulated heaps of the bench's fixed seed (test split code 2)."""
+    from pipeline.simulation.scene import connect, scene_rng, simulate_scene
+
+    client = connect()
+    try:
+        return [simulate_scene(client, cfg, scene_rng(BENCH_SEED, 2, i))
+                for i in range(num_images)]
+    finally:
+        p.disconnect(client)
+
+
 def planning_times(cfg, num_images: int = 8, repeats: int = 3) -> dict[str, float]:
     """Median planning time per image (network + decoding + ranking, CPU, 2 threads).
 
@@ -246,12 +258,8 @@ def planning_times(cfg, num_images: int = 8, repeats: int = 3) -> dict[str, floa
     from pipeline.planner.data import Normalisation
     from pipeline.planner.network import GraspNet, NetworkConfig
     from pipeline.planner.planner import Planner, ranking_config
-    from pipeline.simulation.scene import connect, scene_rng, simulate_scene
-
     torch.set_num_threads(2)
-    client = connect()
-    scenes = [simulate_scene(client, cfg, scene_rng(BENCH_SEED, 2, i)) for i in range(num_images)]
-    p.disconnect(client)
+    scenes = bench_scenes(cfg, num_images)
     intr = intrinsics_of(cfg)
     out: dict[str, float] = {}
     trained = REPO_ROOT / "models" / "train" / "latest" / "model.pt"
@@ -408,13 +416,9 @@ def dexnet_figures(cfg, num_images: int = 6) -> dict[str, float]:
         DexNetPlanner, cem_config, crop_config, gqcnn_config, planarity_config, sampler_config,
         workspace,
     )
-    from pipeline.simulation.scene import connect, scene_rng, simulate_scene
-
     torch.set_num_threads(2)
     full = compose("baseline", ["experiment=default"])
-    client = connect()
-    scenes = [simulate_scene(client, cfg, scene_rng(BENCH_SEED, 2, i)) for i in range(num_images)]
-    p.disconnect(client)
+    scenes = bench_scenes(cfg, num_images)
     intr = intrinsics_of(cfg)
     out: dict[str, float] = {}
     trained = REPO_ROOT / "data" / "baseline" / "latest" / "gqcnn.pt"
