@@ -122,7 +122,8 @@ def label_scene_candidates(scene: Scene, cfg, count: int) -> dict[str, np.ndarra
     cands = sample_candidates(cloud, count, rng, sampler_config(cfg))
     model = suction_config(cfg)
     g = gravity_in_camera(scene.T_world_cam)
-    args = (scene.depth_m, scene.mask, scene.intrinsics, scene.boxes, g, model)
+    # candidates come from what the sensor saw; their labels from the ideal depth (the geometry)
+    args = (scene.depth_clean_m, scene.mask, scene.intrinsics, scene.boxes, g, model)
     if len(cands):
         quality = robust_quality(cands.point, cands.axis, *args, rng=rng)
         reason = evaluate_contacts(cands.point, cands.axis, *args).reason
@@ -299,14 +300,23 @@ def make_planners(cfg, gen: SceneDataset, model_dir: Path, train_dir: Path | Non
 
 
 def evaluate_table2(cfg, gen_dir: Path, model_dir: Path, train_dir: Path | None,
-                    progress: bool) -> dict:
-    """Every planner on the same test images: chosen points, distances, planning times."""
+                    progress: bool, planners: dict | None = None, depth_of=None) -> dict:
+    """Every planner on the same test images: chosen points, distances, planning times.
+
+    ``planners``: name → plan(depth_m, intrinsics, index) (default ``make_planners``);
+    ``depth_of(scene)``: the (H, W) depth the planners see (default ``scene.depth_m``, what the
+    sensor returned). The true face centres always come from the ideal depth.
+    """
     from tqdm import tqdm
 
     gen = SceneDataset(gen_dir, "test")
     n = len(gen) if int(cfg.baseline.max_eval_images) <= 0 else min(
         len(gen), int(cfg.baseline.max_eval_images))
-    planners = make_planners(cfg, gen, model_dir, train_dir)
+    if planners is None:
+        planners = make_planners(cfg, gen, model_dir, train_dir)
+    if depth_of is None:
+        def depth_of(scene):
+            return scene.depth_m
     min_px = int(cfg.surfaces.truth_min_visible_px)
     out = {"scene_index": np.arange(n, dtype=np.int64), "num_centres": np.zeros(n, np.int64),
            "centres": []}
@@ -317,14 +327,15 @@ def evaluate_table2(cfg, gen_dir: Path, model_dir: Path, train_dir: Path | None,
         out[f"{name}_dist"] = np.full(n, np.nan)
     for i in tqdm(range(n), desc=f"{STAGE} table 2", unit="image", disable=not progress):
         scene = gen[i]
-        faces = true_visible_faces(scene.depth_m, scene.mask, scene.intrinsics, scene.boxes,
-                                   min_visible_px=min_px)
+        faces = true_visible_faces(scene.depth_clean_m, scene.mask, scene.intrinsics,
+                                   scene.boxes, min_visible_px=min_px)
+        depth = depth_of(scene)
         centres = np.array([f.center_px for f in faces], np.float64).reshape(-1, 2)
         out["num_centres"][i] = len(centres)
         out["centres"].append(centres)
         for name, plan in planners.items():
             t0 = time.perf_counter()
-            cands = plan(scene.depth_m, scene.intrinsics, i)
+            cands = plan(depth, scene.intrinsics, i)
             times[name].append(time.perf_counter() - t0)
             uv = np.array([cands[0].u, cands[0].v]) if cands else None
             if uv is not None:
@@ -342,7 +353,7 @@ def table2_rows(result: dict, radius_px: float, radii: np.ndarray) -> tuple[list
         d = result[f"{name}_dist"]
         scored = ~np.isnan(d)
         finite = d[np.isfinite(d)]
-        rows.append({"planner": name, "name": PLANNER_NAMES[name],
+        rows.append({"planner": name, "name": PLANNER_NAMES.get(name, name),
                      "images": int(scored.sum()),
                      "no_grasp": int(np.sum(np.isinf(d))),
                      f"within_{radius_px:g}px": round(within_rate(d, radius_px), 6),
@@ -438,11 +449,12 @@ def _log_table2_samples(log: StageLog, cfg, gen_dir: Path, model_dir: Path, resu
 
 
 def _pixels_to_points(scene: Scene, uv: np.ndarray) -> np.ndarray:
+    """(N, 2) pixels → (N, 3) float32 camera-frame points at the ideal depth, metres."""
     uv = np.asarray(uv, np.float64).reshape(-1, 2)
-    h, w = scene.depth_m.shape
+    h, w = scene.depth_clean_m.shape
     u = np.clip(np.round(uv[:, 0]).astype(int), 0, w - 1)
     v = np.clip(np.round(uv[:, 1]).astype(int), 0, h - 1)
-    z = scene.depth_m[v, u].astype(np.float64)
+    z = scene.depth_clean_m[v, u].astype(np.float64)
     k = scene.intrinsics
     return np.stack([(uv[:, 0] - k.cx) / k.fx * z, (uv[:, 1] - k.cy) / k.fy * z, z],
                     axis=1).astype(np.float32)

@@ -11,10 +11,13 @@ seconds per wall second and the wall time of a 3-box trial. The executors (``exe
 ``--only executors``): overhead per trivial task, Ray's start-up, and generation + labelling
 throughput with 1 and 2 workers under each. Training memory (``--only training``): peak
 resident memory of loading an experiment's splits, reading one epoch of batches from disk and a
-few training steps of its network, against what the depth would take held in memory.
+few training steps of its network, against what the depth would take held in memory. The
+sensor model and depth preprocessing (``--only sensor``): time per image of the SR300 model,
+hole filling and the median, and what they do to the depth of the bench's heaps (pixels
+without data, error against the ideal depth).
 
     python -m pipeline.bench [--scenes 60] [--render-frames 30]
-                             [--only stages|planners|closed-loop|executors|training]
+                             [--only stages|planners|closed-loop|executors|training|sensor]
                              [--experiment paper] [--root <paths.root>]
 """
 
@@ -507,6 +510,63 @@ def closed_loop_figures(cfg_name: str = "evaluate") -> dict[str, float]:
     return out
 
 
+def sensor_figures(num_images: int = 20, repeats: int = 3) -> dict[str, float]:
+    """The SR300 model and the depth filters on the bench's heaps: ms per 416 × 416 image
+    (median over images × repeats), the fraction of pixels without data where the ideal depth
+    has data, and the error against the ideal depth (median |e| and the 90th percentile of
+    |e|, mm, over the pixels with data)."""
+    from omegaconf import OmegaConf
+
+    from pipeline.camera.depth_filter import fill_holes, median_filter, preprocess_depth
+    from pipeline.camera.sensor import apply_sensor_model
+    from pipeline.cli import compose
+
+    cfg = OmegaConf.to_object(compose("generate", ["experiment=default", "sensor=sr300"]))
+    filters = {name: OmegaConf.to_object(compose("evaluate", [f"depth_filter={name}"])
+                                         ).depth_filter for name in ("fill", "fill_median")}
+    intr = intrinsics_of(cfg)
+    scenes = bench_scenes(cfg, num_images)
+    times: dict[str, list[float]] = {"sensor": [], "fill": [], "median5": []}
+    stats: dict[str, list[np.ndarray]] = {"sensor": [], "fill": [], "fill_median": []}
+    lost: dict[str, list[float]] = {k: [] for k in stats}
+    for k, sc in enumerate(scenes):
+        ideal = sc.depth_clean_m
+        for r in range(repeats):
+            rng = np.random.default_rng([BENCH_SEED, k, r])
+            t0 = time.perf_counter()
+            noisy = apply_sensor_model(ideal, cfg.sensor, rng, intr)
+            t1 = time.perf_counter()
+            filled = fill_holes(noisy, filters["fill"].fill_holes_px)
+            t2 = time.perf_counter()
+            median_filter(filled, filters["fill_median"].median_px)
+            t3 = time.perf_counter()
+            times["sensor"].append(t1 - t0)
+            times["fill"].append(t2 - t1)
+            times["median5"].append(t3 - t2)
+        images = {"sensor": noisy, "fill": preprocess_depth(noisy, filters["fill"]),
+                  "fill_median": preprocess_depth(noisy, filters["fill_median"])}
+        for name, img in images.items():
+            has = ideal > 0
+            lost[name].append(float(np.mean((img == 0) & has)))
+            ok = has & (img > 0)
+            stats[name].append(np.abs(img[ok] - ideal[ok]))
+    out = {f"{k}_ms_per_image": 1000 * float(np.median(v)) for k, v in times.items()}
+    for name in stats:
+        err = np.concatenate(stats[name])
+        out[f"{name}_missing_fraction"] = float(np.mean(lost[name]))
+        out[f"{name}_median_abs_error_mm"] = 1000 * float(np.median(err))
+        out[f"{name}_p90_abs_error_mm"] = 1000 * float(np.percentile(err, 90))
+    print(f"SR300 model and depth filters, {num_images} default heaps x {repeats} noise draws "
+          "(416 x 416):")
+    print(f"  time per image: sensor model {out['sensor_ms_per_image']:.1f} ms, hole filling "
+          f"{out['fill_ms_per_image']:.1f} ms, 5x5 median {out['median5_ms_per_image']:.1f} ms")
+    for name in stats:
+        print(f"  {name:12s} pixels without data {100 * out[f'{name}_missing_fraction']:5.1f} %, "
+              f"|error| median {out[f'{name}_median_abs_error_mm']:.2f} mm, "
+              f"90th percentile {out[f'{name}_p90_abs_error_mm']:.2f} mm")
+    return out
+
+
 def intrinsics_of(cfg):
     from pipeline.camera.geometry import Intrinsics
     return Intrinsics.from_config(cfg.camera)
@@ -521,7 +581,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--scenes", type=int, default=60, help="scenes per throughput run")
     parser.add_argument("--render-frames", type=int, default=30)
     parser.add_argument("--only", choices=("all", "stages", "planners", "closed-loop", "executors",
-                                           "training"),
+                                           "training", "sensor"),
                         default="all", help="run one group of figures")
     parser.add_argument("--experiment", default="paper",
                         help="--only training: whose latest label artifact to load (paper)")
@@ -546,6 +606,10 @@ def main(argv: list[str] | None = None) -> int:
               f"(loader worker peak {mem['peak_rss_loader_worker_mb']:.0f} MB; "
               f"{mem['train_images_per_s']:.2f} images/s)")
         print(json.dumps({k: round(v, 3) if isinstance(v, float) else v for k, v in mem.items()}))
+        return 0
+    if args.only == "sensor":
+        results.update(sensor_figures())
+        print(json.dumps({k: round(v, 4) for k, v in results.items()}))
         return 0
     if args.only == "executors":
         results.update(executor_figures(args.scenes))

@@ -9,6 +9,13 @@ variant ``evaluate.dexnet_variant``) and every trial, the same heap (seed (seed,
 picks until the trial ends (``pipeline.picking.trial``). Trials run in parallel processes; the
 artifact does not depend on the number of workers.
 
+Every depth image the robot takes (at home and in every servo step) goes through the ``sensor``
+model (default ``ideal``: none; ``sensor=sr300``: noise, holes and quantisation, drawn from a
+stream of its own, seed (seed, 41, trial), so the heaps and the plans' draws are those of the
+noise-free run) and then the ``depth_filter`` preprocessing (default ``none``). With noisy
+depth set ``servo.normal_smoothing`` (the descriptor's per-pixel normals need it; see
+``pipeline.servo.descriptor``).
+
 Artifact (``data/evaluate/<version>/``)::
 
     trials.json             every trial and every attempt: outcome, pattern, G_opt, servo steps,
@@ -47,13 +54,13 @@ from pipeline.picking.trial import OUTCOMES, TRIAL_ENDS, PickRunner, TrialResult
 from pipeline.tracking import StageLog
 
 STAGE = "evaluate"
-SECTIONS = ("seed", "camera", "bin", "physics", "hand", "robot", "suction", "dexnet", "motion",
-            "servo", "eval_boxes", "evaluate")
+SECTIONS = ("seed", "camera", "sensor", "depth_filter", "bin", "physics", "hand", "robot",
+            "suction", "dexnet", "motion", "servo", "eval_boxes", "evaluate")
 NOT_AFFECTING_RESULT = ("evaluate.train_version", "evaluate.baseline_version",
                         "evaluate.workers", "evaluate.force", "evaluate.log_trials",
                         "evaluate.num_threads")
 PLANNERS = ("dcnn", "dexnet")
-HEAP_SEED, PLAN_SEED = 31, 37
+HEAP_SEED, PLAN_SEED, SENSOR_SEED = 31, 37, 41
 PAPER_TABLE3 = [  # paper Table 3, as reported
     {"system": "Dex-Net 3.0", "hand": "suction (1 cup)", "success": 98.0, "planning_s": 3.0,
      "pph": None},
@@ -132,7 +139,8 @@ def run_task(task: TrialTask) -> tuple[TrialResult, dict]:
     keep = task.trial < int(cfg.evaluate.log_trials)
     t0 = time.perf_counter()
     result = runner.run_trial(task.trial, np.random.default_rng([seed, HEAP_SEED, task.trial]),
-                              np.random.default_rng([seed, PLAN_SEED, task.trial]), keep)
+                              np.random.default_rng([seed, PLAN_SEED, task.trial]), keep,
+                              rng_sensor=np.random.default_rng([seed, SENSOR_SEED, task.trial]))
     wall = time.perf_counter() - t0
     timings = {k: list(v) for k, v in runner.timings.items()}
     timings["wall_s"] = wall

@@ -105,7 +105,7 @@ def generate_shard(task: ShardTask) -> ShardSummary:
     unit = cfg.generate.depth_unit
     max_depth = 65535 * unit
     cols: dict[str, list] = {k: [] for k in (
-        "depth", "mask", "scene_index", "seed", "num_boxes", "num_dropped", "num_removed",
+        "depth", "depth_clean", "mask", "scene_index", "seed", "num_boxes", "num_dropped", "num_removed",
         "settle_steps", "settled", "box_type", "box_size", "box_T_world", "box_T_cam")}
     for index in range(task.first, task.first + task.count):
         seed = (cfg.seed, SPLIT_CODES[task.split], index)
@@ -114,6 +114,8 @@ def generate_shard(task: ShardTask) -> ShardSummary:
             raise ValueError(f"depth beyond {max_depth:.2f} m cannot be stored with "
                              f"generate.depth_unit={unit}; increase the unit")
         cols["depth"].append(np.round(scene.depth_m / unit).astype(np.uint16))
+        if cfg.sensor.enabled:  # the ideal depth too: labels and clean-input baselines
+            cols["depth_clean"].append(np.round(scene.depth_clean_m / unit).astype(np.uint16))
         cols["mask"].append(scene.mask)
         cols["scene_index"].append(index)
         cols["seed"].append(seed)
@@ -144,6 +146,8 @@ def generate_shard(task: ShardTask) -> ShardSummary:
         "box_T_world": np.asarray(cols["box_T_world"], dtype=np.float64).reshape(-1, 4, 4),
         "box_T_cam": np.asarray(cols["box_T_cam"], dtype=np.float64).reshape(-1, 4, 4),
     }
+    if cfg.sensor.enabled:
+        arrays["depth_clean"] = np.stack(cols["depth_clean"]).astype(np.uint16)
     assert arrays["depth"].shape == (task.count, H, W)
     Path(task.path).parent.mkdir(parents=True, exist_ok=True)
     write_npz(Path(task.path), arrays)
@@ -247,6 +251,8 @@ def generate(cfg: DictConfig) -> Path:
             "intrinsics": intr.as_dict(),
             "T_world_cam": T_world_cam.tolist(),
             "depth_unit": cfg_obj.generate.depth_unit,
+            # the sensor model of `depth`; with one, shards also hold the ideal `depth_clean`
+            "sensor": OmegaConf.to_container(cfg.sensor, resolve=True),
             "frames": {"camera": "OpenCV: x right, y down, z forward; metres",
                        "world": "z up; origin at the centre of the bin floor's top surface"},
             "bin": OmegaConf.to_container(cfg.bin, resolve=True),

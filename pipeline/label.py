@@ -13,6 +13,10 @@ For every generated depth image:
    target camera pose (inverse kinematics checked by forward kinematics), within joint limits,
    without the arm or hand touching the bin or other boxes; otherwise NG with the failed check.
 
+Labels are computed from the ideal depth (``Scene.depth_clean_m``): when the generation artifact
+has a sensor model (``sensor=sr300``), the network is trained on the noisy images with the labels
+of the true geometry.
+
 Detected surfaces are also matched against the true visible faces computed from the
 simulator's box poses; the accuracy goes into the manifest.
 
@@ -129,8 +133,11 @@ def label_scene(scene: Scene, cfg, robot=None, bin_cfg=None
     ``bin_cfg``: the bin the scene was generated in (robot-level collision checks).
     """
     t0 = time.perf_counter()
-    surfaces = detect_surfaces(scene.depth_m, scene.mask, scene.intrinsics, surface_config(cfg))
-    truth = true_visible_faces(scene.depth_m, scene.mask, scene.intrinsics, scene.boxes,
+    # Labels come from the ideal depth (the simulator's geometry): with a sensor model the
+    # network sees noisy depth with holes but learns where the true surfaces are.
+    depth = scene.depth_clean_m
+    surfaces = detect_surfaces(depth, scene.mask, scene.intrinsics, surface_config(cfg))
+    truth = true_visible_faces(depth, scene.mask, scene.intrinsics, scene.boxes,
                                cfg.surfaces.truth_min_visible_px)
     match = match_surfaces(surfaces, truth, cfg.surfaces.match_max_center_dist,
                            cfg.surfaces.match_max_normal_deg)

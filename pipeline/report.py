@@ -18,6 +18,9 @@ versioned artifact ``data/report/<version>/``::
     figures/labels_sample.png     test depth images with their grasp points coloured by class
     tables/table1_precision.csv   Table 1: precision top 1 / top 1 % / 5 % / 10 %, paper and ours
     figures/pr_curve.png          the DCNN's precision–recall curve on the test split
+    tables/robustness_*.csv       the robustness study (sensor model, Tables 1–2 per input,
+                                  closed-loop variants, Sec. 8.4's policies, failures)
+    figures/robustness_depth.png  ideal, sensor-model and filtered depth of one test image
     log.rrd, log.mcap             Rerun and MCAP logs of the tables (one text entry each)
 
 The three ``label_*``/``surface_*`` tables and ``labels_sample.png`` exist only when there is a
@@ -29,6 +32,14 @@ so it stays in the label manifest's ``timings`` and is not copied here.
 ``table1_precision.csv`` and ``pr_curve.png`` exist only when there is a train artifact
 (``report.train_version``, default the latest one under ``paths.models``); it must have been
 trained on the label artifact the report reads. Training timings are not copied either.
+
+The ``robustness_*`` tables exist only when there is a robustness artifact
+(``report.robustness_version``, default the latest one; ``pipeline.robustness``), read from its
+``robustness.json``. Its depth figure draws the first test image of the study's noisy
+generation artifact (its ``artifacts.generate_noisy``) when that artifact is under
+``data/generate/``; the figure's filter (``conf/depth_filter/fill_median.yaml``) and whether the
+generation artifact was found are part of the report's version key
+(``config.robustness_figure``).
 
 and then publishes README.md, figures/ and tables/ into ``paths.reports`` (``<root>/reports/``),
 replacing those files one by one and leaving other files there alone.
@@ -49,7 +60,9 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 import os
+import re
 import shutil
 import uuid
 from dataclasses import dataclass, field
@@ -58,7 +71,7 @@ from typing import Any
 
 import hydra
 import numpy as np
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 
 from pipeline.artifacts import (
     ArtifactError,
@@ -88,6 +101,7 @@ from pipeline.report_figures import (  # noqa: F401 (FIG_DPI, PNG_METADATA, _out
     figure_servo_convergence,
     figure_table2_curve,
     figure_sample_depth,
+    figure_sensor_depth,
 )
 from pipeline.planner.evaluate import PAPER_TABLE1
 from pipeline.tracking import StageLog
@@ -97,7 +111,7 @@ SECTIONS = ("report",)
 # The upstream versions cover which artifacts are read.
 NOT_AFFECTING_RESULT = ("report.force", "report.generate_version", "report.label_version",
                         "report.train_version", "report.baseline_version",
-                        "report.evaluate_version")
+                        "report.evaluate_version", "report.robustness_version")
 # Files whose content is measured wall-clock time: the same artifacts give other numbers on
 # another run, so `make repro-check` skips them (they are listed in metrics.volatile_files).
 VOLATILE_FILES = ("tables/planning_time.csv", "tables/table3_timing.csv")
@@ -835,6 +849,307 @@ def render_evaluate(info: EvaluateInfo | None, tables: dict[str, Table]) -> list
     return out
 
 
+# ---------------------------------------------------------------------- robustness (Secs. 8.4-8.5)
+ROBUSTNESS_SECTION = "Robustness: sensor noise and the failure cases (Secs. 8.4, 8.5)"
+ROBUSTNESS_NOT_RUN = ("Robustness study: not run yet (`make robustness`, i.e. "
+                      "`python -m pipeline.robustness`).")
+ROBUSTNESS_KEYS = ("table1", "table2", "closed_loop", "sensor", "artifacts")
+ROBUSTNESS_FIGURE = "figures/robustness_depth.png"
+ROBUSTNESS_FIGURE_FILTER = "fill_median"  # conf/depth_filter/<name>.yaml, the figure's 3rd panel
+MODEL_LABELS = {"clean": "clean-trained", "noisy": "noisy-trained"}
+ROBUSTNESS_PLANNERS = {"dcnn_clean": "ours (DCNN), clean-trained",
+                       "dcnn_noisy": "ours (DCNN), noisy-trained",
+                       "gqcnn": "Dex-Net-style GQ-CNN + CEM",
+                       "planarity": "Dex-Net-style planarity + CEM"}
+REFERENCE_POLICY = "paper"  # the policy rows are compared with this variant
+SENSOR_MEANING = {  # pipeline.camera.sensor's parameters (SensorConfig); metres and degrees
+    "name": "the sensor model (`conf/sensor/<name>.yaml`)",
+    "enabled": "whether the model is applied (false: ideal depth)",
+    "noise_sigma_0": "σ0 (m) of the axial noise "
+                     "σ(z, θ) = σ0 + σ2·z² + σθ/√z · θ²/(π/2 − θ)²",
+    "noise_sigma_2": "σ2 (m per m²): the noise growing with the square of depth",
+    "noise_sigma_theta": "σθ (m·√m): the noise growing at grazing incidence θ",
+    "projector_baseline": "projector–camera distance along x (m): projector shadows beside "
+                          "depth steps",
+    "dropout_angle_start_deg": "incidence angle (°) where steep-surface dropout starts",
+    "dropout_angle_deg": "incidence angle (°) from which steep-surface dropout is certain",
+    "min_range": "no data nearer than this (m)",
+    "max_range": "no data farther than this (m)",
+    "edge_jump": "a depth step between 4-neighbours (m)",
+    "edge_dropout_prob": "chance that a pixel at such a step has no data",
+    "quantisation_step": "depth unit (m)",
+}
+
+
+@dataclass
+class RobustnessInfo(ArtifactInfo):
+    """The robustness artifact: folder, manifest and its ``robustness.json`` (``data``)."""
+
+    data: dict = field(default_factory=dict)
+
+
+def _num(value: Any) -> float | None:
+    """A table value as a float; None for a missing or not-a-number value (shown as —)."""
+    if value is None or isinstance(value, bool):
+        return None
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        return None
+    return x if np.isfinite(x) else None
+
+
+def _int(value: Any) -> int | None:
+    x = _num(value)
+    return None if x is None else int(round(x))
+
+
+def _times(value: Any, factor: float = 100.0) -> float | None:
+    x = _num(value)
+    return None if x is None else factor * x
+
+
+def resolve_robustness(root: Path, version: str) -> RobustnessInfo | None:
+    """The robustness artifact to report, or None when ``version`` is "latest" and none exists.
+
+    Raises ``ArtifactError`` when a named version does not exist or when its ``robustness.json``
+    lacks the tables, the sensor model or the artifact versions.
+    """
+    folder = _optional_artifact(root, "robustness", version)
+    if folder is None:
+        return None
+    manifest = load_manifest(folder)
+    try:
+        # Python's json reads the NaN the study writes for undefined rates.
+        data = json.loads((folder / "robustness.json").read_text())
+        complete = (isinstance(data, dict) and set(ROBUSTNESS_KEYS) <= set(data)
+                    and all(isinstance(data[k], list) for k in ROBUSTNESS_KEYS[:3])
+                    and all(isinstance(data[k], dict) for k in ROBUSTNESS_KEYS[3:]))
+    except (OSError, ValueError):
+        complete = False
+    if not complete:
+        raise ArtifactError(
+            f"{folder.name}/robustness.json (robustness) is missing or lacks "
+            f"{' / '.join(ROBUSTNESS_KEYS)}: recompute it with `make robustness` "
+            "(robustness.force=true).")
+    return RobustnessInfo(folder, manifest, data)
+
+
+def robustness_generation(root: Path, info: RobustnessInfo) -> Path | None:
+    """The study's noisy generation artifact (drawn in the depth figure), None when it is not
+    under ``root``; an artifact whose files do not match its manifest is an error."""
+    version = info.data["artifacts"].get("generate_noisy")
+    if not version:
+        return None
+    folder = Path(root) / "generate" / str(version)
+    if not (folder / "manifest.json").is_file():
+        return None
+    return check_artifact(folder.resolve(), "report.robustness_version")
+
+
+def _filter_config(name: str) -> DictConfig:
+    return OmegaConf.load(Path(CONF_DIR) / "depth_filter" / f"{name}.yaml")
+
+
+def robustness_table1_table(info: RobustnessInfo) -> Table:
+    """Table 1 of each network on each input (percent; CSV with 4 decimals)."""
+    headers = ["network", "input", *(h for _, h in TABLE1_COLUMNS), "predictions", "images"]
+    rows = [[MODEL_LABELS.get(str(r.get("model")), str(r.get("model"))), str(r.get("input")),
+             *(_times(r.get(k)) for k, _ in TABLE1_COLUMNS), _int(r.get("predictions")),
+             _int(r.get("images"))] for r in info.data["table1"]]
+    n = len(TABLE1_COLUMNS)
+    return Table("robustness_table1", headers, rows, ["", ""] + ["{:.2f} %"] * n + ["{}", "{}"],
+                 csv_formats=["", ""] + ["{:.4f}"] * n + ["{}", "{}"], text_columns=2)
+
+
+def _within_key(rows: list[dict]) -> tuple[str, str]:
+    """The Table 2 rows' ``within_<r>px`` key and its radius as text (``"30"``)."""
+    for r in rows:
+        for k in r:
+            m = re.fullmatch(r"within_(.+)px", k)
+            if m:
+                return k, m.group(1)
+    return "within_30px", "30"
+
+
+def robustness_table2_table(info: RobustnessInfo) -> Table:
+    """Table 2 of each planner on each input: share of images within the radius (percent)."""
+    rows_in = info.data["table2"]
+    key, radius = _within_key(rows_in)
+    headers = ["planner", "input", "images", f"within {radius} px", "no grasp",
+               "median distance (px)"]
+    rows = [[ROBUSTNESS_PLANNERS.get(str(r.get("planner")), str(r.get("planner"))),
+             str(r.get("input")), _int(r.get("images")), _times(r.get(key)),
+             _int(r.get("no_grasp")), _num(r.get("median_distance_px"))] for r in rows_in]
+    return Table("robustness_table2", headers, rows,
+                 ["", "", "{}", "{:.2f} %", "{}", "{:.1f}"],
+                 csv_formats=["", "", "{}", "{:.4f}", "{}", "{:.3f}"], text_columns=2)
+
+
+def _ratio(num: Any, den: Any) -> str | None:
+    a, b = _int(num), _int(den)
+    return None if a is None or b is None else f"{a}/{b}"
+
+
+def _closed_loop_row(r: dict) -> list[Any]:
+    return [str(r.get("variant")), MODEL_LABELS.get(str(r.get("model")), str(r.get("model"))),
+            str(r.get("overrides") or "-"), _times(r.get("success_rate")),
+            _ratio(r.get("successes"), r.get("attempts")),
+            _ratio(r.get("picked"), r.get("boxes")),
+            _num(r.get("pph_motion"))]
+
+
+CLOSED_LOOP_HEADERS = ["variant", "network", "overrides", "success rate",
+                       "successes / attempts", "picked / boxes", "PPH (motion only)"]
+
+
+def robustness_closed_loop_table(info: RobustnessInfo) -> Table:
+    """The closed-loop variants of the sensor study (group ``sensor``)."""
+    rows = [_closed_loop_row(r) for r in info.data["closed_loop"] if r.get("group") == "sensor"]
+    return Table("robustness_closed_loop", CLOSED_LOOP_HEADERS, rows,
+                 ["", "", "", "{:.1f} %", "", "", "{:.1f}"],
+                 csv_formats=["", "", "", "{:.4f}", "", "", "{:.1f}"], text_columns=3)
+
+
+def robustness_policies_table(info: RobustnessInfo) -> Table:
+    """Sec. 8.4's policies (group ``policy``), with the change in success rate (percentage
+    points) and PPH against the ``paper`` row; that row itself shows none."""
+    policy = [r for r in info.data["closed_loop"] if r.get("group") == "policy"]
+    ref = next((r for r in policy if r.get("variant") == REFERENCE_POLICY), None)
+    ref_rate = _times(ref.get("success_rate")) if ref is not None else None
+    ref_pph = _num(ref.get("pph_motion")) if ref is not None else None
+    rows = []
+    for r in policy:
+        row = _closed_loop_row(r)
+        rate, pph = row[3], row[6]
+        own = r is ref
+        row += [None if own or rate is None or ref_rate is None else rate - ref_rate,
+                None if own or pph is None or ref_pph is None else pph - ref_pph]
+        rows.append(row)
+    headers = CLOSED_LOOP_HEADERS + [f"success rate vs. {REFERENCE_POLICY} (pp)",
+                                     f"PPH vs. {REFERENCE_POLICY}"]
+    return Table("robustness_policies", headers, rows,
+                 ["", "", "", "{:.1f} %", "", "", "{:.1f}", "{:+.1f}", "{:+.1f}"],
+                 csv_formats=["", "", "", "{:.4f}", "", "", "{:.1f}", "{:.4f}", "{:.1f}"],
+                 text_columns=3)
+
+
+def robustness_failures_table(info: RobustnessInfo) -> Table:
+    """Failed attempts by kind of every closed-loop variant (the ``fail_*`` columns)."""
+    rows_in = info.data["closed_loop"]
+    kinds = list(dict.fromkeys(k for r in rows_in for k in r if k.startswith("fail_")))
+    rows = [[str(r.get("group")), str(r.get("variant")), *(_int(r.get(k)) for k in kinds)]
+            for r in rows_in]
+    return Table("robustness_failures", ["group", "variant", *(k[5:] for k in kinds)], rows,
+                 text_columns=2)
+
+
+def _param_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return f"{value:g}"
+    return str(value)
+
+
+def robustness_sensor_table(info: RobustnessInfo) -> Table:
+    """The sensor model's parameters, as the study recorded them."""
+    rows = [[k, _param_value(v), SENSOR_MEANING.get(k)] for k, v in info.data["sensor"].items()]
+    return Table("robustness_sensor_model", ["parameter", "value", "meaning"], rows,
+                 text_columns=3)
+
+
+def _input_meaning(name: str) -> str:
+    if name == "ideal":
+        return "*ideal*: the renderer's depth"
+    if name == "sensor":
+        return "*sensor*: the sensor model's depth"
+    head, _, filt = name.partition("+")
+    if head == "sensor" and filt:
+        return (f"*{name}*: the sensor model's depth after `conf/depth_filter/{filt}.yaml` "
+                "(`pipeline/camera/depth_filter.py`)")
+    return f"*{name}*"
+
+
+def render_robustness(info: RobustnessInfo | None, tables: dict[str, Table],
+                      figure: str | None, figure_note: str | None = None) -> list[str]:
+    """README lines of the robustness section (``figure``: the depth figure, if drawn;
+    ``figure_note``: why it was not)."""
+    out = [f"## {ROBUSTNESS_SECTION}", ""]
+    if info is None:
+        return out + [ROBUSTNESS_NOT_RUN, ""]
+    data = info.data
+    cfg = (info.manifest.get("config") or {}).get("robustness") or {}
+    sensor = data["sensor"].get("name", cfg.get("sensor"))
+    arts = data["artifacts"]
+    inputs = list(dict.fromkeys(str(r.get("input")) for r in data["table1"] + data["table2"]))
+    images = sorted({_int(r.get("images")) for r in data["table1"]} - {None})
+    trials = cfg.get("closed_loop_trials")
+    out += [
+        f"Robustness artifact `{info.version}` (`python -m pipeline.robustness`): the method on "
+        f"depth from the `{sensor}` sensor model instead of the ideal rendered depth, with a "
+        "network trained on ideal depth (*clean-trained*, train artifact "
+        f"`{arts.get('train_clean')}`) and one trained on the sensor's depth (*noisy-trained*, "
+        f"`{arts.get('train_noisy')}`). Tables 1 and 2 are measured on the test split of the "
+        f"noisy generation artifact `{arts.get('generate_noisy')}`"
+        + (f" ({', '.join(str(n) for n in images)} images)" if images else "")
+        + ", the same heaps as the clean one; the labels come from the ideal depth, so they "
+        "are the same for every input. Inputs: " + "; ".join(_input_meaning(n) for n in inputs)
+        + ". The closed-loop variants are ordinary evaluation artifacts of the DCNN planner"
+        + (f" ({trials} trial{'' if trials == 1 else 's'} each)" if trials is not None else "")
+        + ", all on the same heaps and seeds; they differ only in the overrides shown.",
+        "",
+        "### Sensor model",
+        "",
+        f"The parameters of `conf/sensor/{sensor}.yaml` as the study used them "
+        "(`pipeline/camera/sensor.py`).",
+        "",
+        tables["robustness_sensor_model"].markdown(),
+    ]
+    if figure:
+        out += ["The first test image's ideal depth, its depth from this model and that depth "
+                f"after `depth_filter={ROBUSTNESS_FIGURE_FILTER}`: [{figure}]({figure}).", ""]
+    elif figure_note:
+        out += [figure_note, ""]
+    out += [
+        "### Sensor noise: Table 1",
+        "",
+        "Precision (%) of each network's predictions per input (Table 1's definition, "
+        f"\"{TABLE1_SECTION}\").",
+        "",
+        tables["robustness_table1"].markdown(),
+        "### Sensor noise: Table 2",
+        "",
+        "Share of test images whose optimal grasp point lies within the radius of a true "
+        "surface centre, per planner and input (Table 2's measure, "
+        f"\"{TABLE2_SECTION}\"; an image without a grasp counts as a miss).",
+        "",
+        tables["robustness_table2"].markdown(),
+        "### Sensor noise: closed loop",
+        "",
+        "Success rate = successful grasps / attempts; PPH = successful picks per hour of "
+        "simulated robot motion (as in Table 3).",
+        "",
+        tables["robustness_closed_loop"].markdown(),
+        "### Sec. 8.4 failure cases: closed loop",
+        "",
+        "The paper's proposed fixes of its failure cases on ideal depth, each against the "
+        f"paper's policy (the `{REFERENCE_POLICY}` row): differences in success rate are "
+        "percentage points, in PPH picks per hour.",
+        "",
+        tables["robustness_policies"].markdown(),
+        "Failed attempts by kind (see Table 3's list):",
+        "",
+        tables["robustness_failures"].markdown(),
+        "CSV versions: "
+        + ", ".join(f"[tables/{n}.csv](tables/{n}.csv)" for n in (
+            "robustness_sensor_model", "robustness_table1", "robustness_table2",
+            "robustness_closed_loop", "robustness_policies", "robustness_failures")) + ".",
+        "",
+    ]
+    return out
+
+
 # ---------------------------------------------------------------------- README
 def _commit(manifest: dict) -> str:
     code = manifest.get("code", {})
@@ -848,7 +1163,9 @@ def render_readme(version: str, upstream: dict[str, tuple[str, dict]], tables: d
                   figures: dict[str, str], gen_cfg: dict, stats: DatasetStats,
                   labels: LabelInfo | None = None, trained: TrainInfo | None = None,
                   baseline: BaselineInfo | None = None,
-                  evaluated: EvaluateInfo | None = None) -> str:
+                  evaluated: EvaluateInfo | None = None,
+                  robustness: RobustnessInfo | None = None,
+                  robustness_note: str | None = None) -> str:
     phys = gen_cfg.get("physics", {})
     dt = float(phys.get("time_step", 1 / 240))
     cap = phys.get("max_settle_steps")
@@ -875,6 +1192,8 @@ def render_readme(version: str, upstream: dict[str, tuple[str, dict]], tables: d
         out.append(f"| baseline | not run yet (`make baseline`) | {NONE} |")
     if evaluated is None:
         out.append(f"| evaluate | not run yet (`make evaluate`) | {NONE} |")
+    if robustness is None:
+        out.append(f"| robustness | not run yet (`make robustness`) | {NONE} |")
     out += [
         "",
         "Each artifact lives in `data/<stage>/<version>/`; its `manifest.json` holds the full "
@@ -908,6 +1227,9 @@ def render_readme(version: str, upstream: dict[str, tuple[str, dict]], tables: d
     out += render_train(trained, tables, pr_figure if pr_figure in figures else None)
     out += render_baseline(baseline, tables, figures)
     out += render_evaluate(evaluated, tables)
+    out += render_robustness(robustness, tables,
+                             ROBUSTNESS_FIGURE if ROBUSTNESS_FIGURE in figures else None,
+                             robustness_note)
     out += ["## Figures", ""]
     for rel, caption in figures.items():
         out += [f"![{caption}]({rel})", "", f"*{caption}*", ""]
@@ -986,7 +1308,16 @@ def report(cfg: DictConfig) -> Path:
     baseline = resolve_baseline(root, str(cfg.report.baseline_version), gen_version,
                                 trained.version if trained is not None else None)
     evaluated = resolve_evaluate(root, str(cfg.report.evaluate_version))
+    robustness = resolve_robustness(root, str(cfg.report.robustness_version))
+    robust_gen = robustness_generation(root, robustness) if robustness is not None else None
     config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
+    if robustness is not None:
+        # What the depth figure reads besides the artifacts: the filter's parameters, and
+        # whether the study's noisy generation artifact is there to draw from.
+        filter_cfg = _filter_config(ROBUSTNESS_FIGURE_FILTER)
+        config["robustness_figure"] = {
+            "generate": robust_gen.name if robust_gen is not None else None,
+            "depth_filter": OmegaConf.to_container(filter_cfg, resolve=True)}
     upstream = {"generate": gen_version}
     if labels is not None:
         upstream["label"] = labels.version
@@ -996,6 +1327,8 @@ def report(cfg: DictConfig) -> Path:
         upstream["baseline"] = baseline.version
     if evaluated is not None:
         upstream["evaluate"] = evaluated.version
+    if robustness is not None:
+        upstream["robustness"] = robustness.version
     version = compute_version(STAGE, config, upstream)
     gen_cfg = gen_manifest.get("config", {})
 
@@ -1020,6 +1353,13 @@ def report(cfg: DictConfig) -> Path:
         if evaluated is not None:
             for t in (table3_table(evaluated), failures_table(evaluated),
                       table3_timing_table(evaluated)):
+                tables[t.name] = t
+        if robustness is not None:
+            for t in (robustness_sensor_table(robustness), robustness_table1_table(robustness),
+                      robustness_table2_table(robustness),
+                      robustness_closed_loop_table(robustness),
+                      robustness_policies_table(robustness),
+                      robustness_failures_table(robustness)):
                 tables[t.name] = t
         for t in tables.values():
             path = run.work_dir / "tables" / f"{t.name}.csv"
@@ -1076,6 +1416,28 @@ def report(cfg: DictConfig) -> Path:
                 "Visual-servoing error over simulated time for the attempts of the logged "
                 "trials: translation error |p_e − p_e*| (normalised) and rotation error |uθ|.")
 
+        robustness_note = None
+        if robustness is not None:
+            gen_noisy = robustness.data["artifacts"].get("generate_noisy")
+            sensor = robustness.data["sensor"].get("name", "sensor")
+            drawn = None
+            if robust_gen is not None:
+                drawn = figure_sensor_depth(robust_gen, filter_cfg, ROBUSTNESS_FIGURE_FILTER,
+                                            str(sensor), run.work_dir / ROBUSTNESS_FIGURE)
+            if drawn is not None:
+                figures[ROBUSTNESS_FIGURE] = (
+                    f"Test image #{drawn} of generation artifact `{gen_noisy}` (the robustness "
+                    f"study's noisy generation): the ideal depth, the `{sensor}` model's depth "
+                    f"and that depth after `depth_filter={ROBUSTNESS_FIGURE_FILTER}` (magenta: "
+                    "no data; one colour scale).")
+            else:
+                (run.work_dir / ROBUSTNESS_FIGURE).unlink(missing_ok=True)
+                robustness_note = (
+                    f"No depth figure: the study's noisy generation artifact `{gen_noisy}` "
+                    + ("has no test images." if robust_gen is not None else
+                       "is not under `data/generate/` (rerun `make robustness`, which "
+                       "recreates it, then the report)."))
+
         used = {"generate": (gen_version, gen_manifest)}
         if labels is not None:
             used["label"] = (labels.version, labels.manifest)
@@ -1085,8 +1447,10 @@ def report(cfg: DictConfig) -> Path:
             used["baseline"] = (baseline.version, baseline.manifest)
         if evaluated is not None:
             used["evaluate"] = (evaluated.version, evaluated.manifest)
+        if robustness is not None:
+            used["robustness"] = (robustness.version, robustness.manifest)
         readme = render_readme(run.version, used, tables, figures, gen_cfg, stats, labels,
-                               trained, baseline, evaluated)
+                               trained, baseline, evaluated, robustness, robustness_note)
         (run.work_dir / "README.md").write_text(readme)
 
         with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version) as log:
@@ -1109,6 +1473,7 @@ def report(cfg: DictConfig) -> Path:
             "train_version": trained.version if trained is not None else None,
             "baseline_version": baseline.version if baseline is not None else None,
             "evaluate_version": evaluated.version if evaluated is not None else None,
+            "robustness_version": robustness.version if robustness is not None else None,
             "volatile_files": sorted(f for f in VOLATILE_FILES if (run.work_dir / f).is_file()),
             "scenes": dict(stats.scenes),
             "boxes": dict(stats.boxes),

@@ -25,6 +25,7 @@ FIG_DPI = 100
 # PNG text chunks: matplotlib writes "Software: matplotlib version ..." unless told not to.
 PNG_METADATA = {"Software": None}
 NO_DATA = "#5c3a21"  # depth pixels without a value, in the labels figure (brown)
+SENSOR_NO_DATA = "#e4007c"  # depth pixels without a value, in the sensor-depth figure (magenta)
 CLASS_MEANING = {GraspClass.R: "right cup", GraspClass.L: "left cup", GraspClass.B: "both cups",
                  GraspClass.NG: "not graspable"}
 
@@ -337,3 +338,44 @@ def figure_servo_convergence(csv_path: Path, path: Path) -> None:
         ax_t.legend(fontsize=8)
     fig.suptitle("2.5D visual-servoing convergence (logged trials)", fontsize=10)
     _save(fig, path)
+
+
+def figure_sensor_depth(gen_dir: Path, filter_cfg, filter_name: str, sensor_name: str,
+                        path: Path) -> int | None:
+    """The first test image of a generation artifact made with a sensor model, in three panels:
+    the ideal depth (``Scene.depth_clean_m``), the sensor's depth (``Scene.depth_m``) and that
+    depth after the preprocessing ``filter_cfg`` (``pipeline.camera.depth_filter``; its name
+    ``filter_name`` is shown). One colour scale (the ideal depth's range); pixels without data
+    (0) in magenta. Returns the scene index drawn, None when the test split is empty."""
+    from pipeline.camera.depth_filter import preprocess_depth
+
+    ds = SceneDataset(gen_dir, "test")
+    if len(ds) == 0:
+        fig = Figure(figsize=(6.0, 2.0), dpi=FIG_DPI)
+        fig.text(0.5, 0.5, "no test images", ha="center", va="center")
+        _save(fig, path)
+        return None
+    scene = ds[0]
+    panels = (("ideal depth", scene.depth_clean_m),
+              (f"{sensor_name} model", scene.depth_m),
+              (f"{sensor_name} model + {filter_name}", preprocess_depth(scene.depth_m, filter_cfg)))
+    valid = scene.depth_clean_m[scene.depth_clean_m > 0]
+    vmin, vmax = (float(valid.min()), float(valid.max())) if valid.size else (0.0, 1.0)
+    vmax = vmax if vmax > vmin else vmin + 1e-3
+    fig = Figure(figsize=(11.0, 3.6), dpi=FIG_DPI, layout="constrained")
+    axes = fig.subplots(1, 3)
+    cmap = matplotlib.colormaps["viridis"].with_extremes(bad=SENSOR_NO_DATA)
+    im = None
+    for ax, (title, depth) in zip(axes, panels):
+        depth = np.asarray(depth, np.float32)
+        missing = float(np.mean(depth <= 0))
+        im = ax.imshow(np.where(depth > 0, depth, np.nan), cmap=cmap, vmin=vmin, vmax=vmax,
+                       interpolation="nearest")
+        ax.set_title(f"{title}: {100.0 * missing:.1f} % of pixels without data", fontsize=8)
+        ax.set_axis_off()
+    cb = fig.colorbar(im, ax=list(axes), shrink=0.9)
+    cb.set_label("depth (m)")
+    fig.suptitle(f"Ideal vs. sensor-model depth, test #{scene.index} "
+                 "(magenta = no data; one colour scale)", fontsize=9)
+    _save(fig, path)
+    return scene.index

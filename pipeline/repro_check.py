@@ -26,7 +26,7 @@ from pipeline.tracking import rrd_equal
 from pipeline.view import MODEL_STAGES
 
 # The smoke pipeline, in order; later issues append their stages here.
-STAGES = ("generate", "label", "train", "baseline", "evaluate", "report")
+STAGES = ("generate", "label", "train", "baseline", "evaluate", "robustness", "report")
 
 
 
@@ -98,13 +98,29 @@ def compare_artifacts(stage: str, a: Path, b: Path) -> list[str]:
     return diffs
 
 
+def _versions(stage_dir: Path) -> list[str]:
+    """The complete artifacts of a stage folder (the robustness study makes several per
+    stage: the clean and the noisy pipeline, one evaluation per variant)."""
+    if not stage_dir.is_dir():
+        return []
+    return sorted(d.name for d in stage_dir.iterdir() if d.is_dir() and not d.is_symlink()
+                  and not d.name.startswith(".") and (d / "manifest.json").is_file())
+
+
 def compare(root_a: Path, root_b: Path) -> list[str]:
-    """Differences between the two runs' artifacts (empty when identical)."""
+    """Differences between the two runs' artifacts, every version of every stage (empty when
+    identical)."""
     diffs = []
     for stage in STAGES:
         top = "models" if stage in MODEL_STAGES else "data"
-        diffs += compare_artifacts(stage, resolve_artifact(root_a / top, stage),
-                                   resolve_artifact(root_b / top, stage))
+        va, vb = _versions(root_a / top / stage), _versions(root_b / top / stage)
+        if va != vb:
+            diffs.append(f"{stage}: the runs made different versions ({va} vs {vb})")
+        if not va:
+            diffs.append(f"{stage}: no artifact in the first run")
+        for version in sorted(set(va) & set(vb)):
+            diffs += compare_artifacts(stage, resolve_artifact(root_a / top, stage, version),
+                                       resolve_artifact(root_b / top, stage, version))
     return diffs
 
 

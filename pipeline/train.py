@@ -156,12 +156,17 @@ def evaluate_loss(net, data: GraspDataset, loss_cfg: LossConfig, device) -> floa
 
 
 @torch.no_grad()
-def table1(planner: Planner, data: GraspDataset, radius_px: float) -> dict:
-    """Table 1 on a split: every cell a prediction (``planner.evaluate``)."""
+def table1(planner: Planner, data: GraspDataset, radius_px: float, depth_of=None) -> dict:
+    """Table 1 on a split: every cell a prediction (``planner.evaluate``).
+
+    ``depth_of(i)``: the (H, W) depth image, metres, the network sees for image i (default:
+    ``data.depth_m``, the generation artifact's ``depth``); the ground truth is ``data.rows``.
+    """
+    depth_of = data.depth_m if depth_of is None else depth_of
     images = []
     for start in range(0, len(data), EVAL_BATCH):
         idx = list(range(start, min(start + EVAL_BATCH, len(data))))
-        raw = planner.predict(np.stack([data.depth_m(i) for i in idx]))
+        raw = planner.predict(np.stack([depth_of(i) for i in idx]))
         for k, i in enumerate(idx):
             preds = decode_output(raw[k], threshold=-1.0, image_size=planner.size)
             rows = data.rows[i]

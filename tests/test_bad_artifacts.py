@@ -132,7 +132,7 @@ VERSION_KEYS = [
     "baseline.generate_version", "baseline.train_version",
     "evaluate.train_version", "evaluate.baseline_version",
     "report.generate_version", "report.label_version", "report.train_version",
-    "report.baseline_version", "report.evaluate_version",
+    "report.baseline_version", "report.evaluate_version", "report.robustness_version",
 ]
 
 

@@ -20,8 +20,8 @@ from pipeline.label import LabelSet, label
 from pipeline.labelling.types import GraspClass
 from pipeline.planner.evaluate import PAPER_TABLE1
 from pipeline.report import (
-    LABEL_NOT_RUN, TABLE1_SECTION, TRAIN_NOT_RUN, LabelInfo, _outline, check_labels,
-    dataset_stats, publish, report,
+    LABEL_NOT_RUN, ROBUSTNESS_NOT_RUN, TABLE1_SECTION, TRAIN_NOT_RUN, LabelInfo, _outline,
+    check_labels, dataset_stats, publish, report,
 )
 from pipeline.train import train
 
@@ -332,6 +332,7 @@ def test_report_without_label_artifact(root_gen_only: Path, report_a: Path) -> N
     assert LABEL_NOT_RUN in readme
     assert "Labelling: not run yet (`make label`)" in readme
     assert "Training: not run yet (`make train`)" in readme and TRAIN_NOT_RUN in readme
+    assert ROBUSTNESS_NOT_RUN in readme and "## Robustness" in readme
     assert "### Grasp points per class" not in readme
     files = load_manifest(out)["files"]
     assert "tables/dataset_splits.csv" in files and "figures/sample_depth.png" in files

@@ -48,6 +48,9 @@ PLUMBING = ("pipeline.cli", "pipeline.config", "pipeline.artifacts", "pipeline.e
 def _module_path(name: str) -> Path | None:
     """File of module ``pipeline.a.b`` (``a/b.py`` or ``a/b/__init__.py``), None if none."""
     rel = Path(*name.split(".")[1:])
+    if not rel.parts:  # the package itself (``from pipeline import x``)
+        path = PACKAGE_ROOT / "__init__.py"
+        return path if path.is_file() else None
     for path in (PACKAGE_ROOT / rel.with_suffix(".py"), PACKAGE_ROOT / rel / "__init__.py"):
         if path.is_file():
             return path

@@ -5,6 +5,7 @@ from pipeline.config.schema import (  # noqa: F401
     BoxesConfig,
     BoxType,
     CameraConfig,
+    DepthFilterConfig,
     ExecutorConfig,
     GenerateConfig,
     LoggingConfig,

@@ -103,20 +103,34 @@ class PhysicsConfig:
 
 @dataclass
 class SensorConfig:
-    """Optional depth-sensor model applied after rendering (``enabled: false`` = ideal depth).
+    """Depth-sensor model applied after rendering (``enabled: false`` = ideal depth).
 
-    Noise: Gaussian with sigma(z) = ``noise_sigma_at_1m`` · z² (metres), the quadratic growth
-    of structured-light / active-stereo sensors. Edge dropout: pixels whose depth differs from a
-    4-neighbour by more than ``edge_jump`` are set to 0 (no data) with probability
-    ``edge_dropout_prob``. Quantisation: depth rounded to ``quantisation_step`` metres.
+    See ``pipeline.camera.sensor`` for the model and ``conf/sensor/sr300.yaml`` for the
+    parameters' sources. Metres and degrees.
     """
 
     name: str = "ideal"
     enabled: bool = False
-    noise_sigma_at_1m: float = 0.0
-    edge_jump: float = 0.01
-    edge_dropout_prob: float = 0.0
-    quantisation_step: float = 0.0
+    noise_sigma_0: float = 0.0  # m, σ(z, θ) = σ0 + σ2·z² + σθ/√z · θ²/(π/2 − θ)²
+    noise_sigma_2: float = 0.0  # m per m²
+    noise_sigma_theta: float = 0.0  # m·√m
+    projector_baseline: float = 0.0  # m along the camera's x axis (0 = no projector shadow)
+    dropout_angle_start_deg: float = 90.0  # steep-surface dropout starts at this incidence angle
+    dropout_angle_deg: float = 90.0  # ... and is certain from this one (90 = off)
+    min_range: float = 0.0  # m: no data nearer than this
+    max_range: float = 100.0  # m: no data beyond this
+    edge_jump: float = 0.01  # m: a depth step between 4-neighbours
+    edge_dropout_prob: float = 0.0  # chance a pixel at a depth step is lost
+    quantisation_step: float = 0.0  # m (0 = none)
+
+
+@dataclass
+class DepthFilterConfig:
+    """Depth preprocessing before the planners (``pipeline.camera.depth_filter``); 0 = off."""
+
+    name: str = "none"
+    fill_holes_px: int = 0  # fill holes from the farthest neighbour, this many 3 x 3 passes
+    median_px: int = 0  # median kernel (3 or 5) after filling
 
 
 @dataclass
@@ -327,6 +341,7 @@ class ServoSchema:
     tolerance_rot_deg: float = 1.0
     timeout_s: float = 8.0
     joint_damping: float = 0.001
+    normal_smoothing: int = 0  # descriptor: average n_p over (2k+1)^2 pixels (noisy depth)
 
 
 @dataclass
@@ -356,6 +371,30 @@ class EvaluateConfig:
 
 
 @dataclass
+class ClosedLoopVariant:
+    """One closed-loop run of the robustness study: a network and evaluate-stage overrides."""
+
+    name: str = MISSING
+    model: str = "clean"  # clean | noisy: the network trained on ideal / on the sensor's depth
+    overrides: List[str] = field(default_factory=list)
+
+
+@dataclass
+class RobustnessConfig:
+    """The robustness study (``pipeline.robustness``)."""
+
+    sensor: str = "sr300"
+    table1_inputs: List[str] = field(default_factory=lambda: ["ideal", "sensor"])
+    table2_inputs: List[str] = field(default_factory=lambda: ["ideal", "sensor"])
+    max_images: int = 0
+    closed_loop_trials: int = 10
+    closed_loop: List[ClosedLoopVariant] = field(default_factory=list)
+    policies: List[ClosedLoopVariant] = field(default_factory=list)
+    log_images: int = 4
+    force: bool = False
+
+
+@dataclass
 class ReportConfig:
     """The report stage: which artifacts to gather and how many sample images to draw."""
 
@@ -364,6 +403,8 @@ class ReportConfig:
     train_version: str = "latest"  # no train artifact at all: the report leaves Table 1 out
     baseline_version: str = "latest"  # no baseline artifact at all: the report leaves Table 2 out
     evaluate_version: str = "latest"  # no evaluate artifact at all: the report leaves Table 3 out
+    # no robustness artifact at all: the report leaves the robustness section out
+    robustness_version: str = "latest"
     num_sample_images: int = 6
     force: bool = False
 
@@ -407,6 +448,7 @@ class PipelineConfig:
     boxes: BoxesConfig = field(default_factory=BoxesConfig)
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
     sensor: SensorConfig = field(default_factory=SensorConfig)
+    depth_filter: DepthFilterConfig = field(default_factory=DepthFilterConfig)
     generate: GenerateConfig = field(default_factory=GenerateConfig)
     hand: HandConfig = field(default_factory=HandConfig)
     robot: RobotSchema = field(default_factory=RobotSchema)
@@ -421,6 +463,7 @@ class PipelineConfig:
     motion: MotionSchema = field(default_factory=MotionSchema)
     servo: ServoSchema = field(default_factory=ServoSchema)
     evaluate: EvaluateConfig = field(default_factory=EvaluateConfig)
+    robustness: RobustnessConfig = field(default_factory=RobustnessConfig)
     eval_boxes: BoxesConfig = field(default_factory=BoxesConfig)
     logging: LoggingConfig = field(default_factory=LoggingConfig)
     executor: ExecutorConfig = field(default_factory=ExecutorConfig)

@@ -10,7 +10,9 @@ Artifact layout (``data/generate/<version>/``)::
 
 Each shard holds ``N`` scenes (``generate.scenes_per_shard``) and ``M`` boxes in all:
 
-    depth         (N, H, W) uint16   z-depth in units of ``depth_unit`` metres (0 = no data)
+    depth         (N, H, W) uint16   z-depth in units of ``depth_unit`` metres (0 = no data), as
+                                     the sensor model (``camera.json``'s ``sensor``) returns it
+    depth_clean   (N, H, W) uint16   the ideal rendered depth; only when a sensor model is on
     mask          (N, H, W) uint8    0 = not a box (bin, ground); k = the scene's k-th box (1-based)
     scene_index   (N,) int64         index of the scene within its split
     seed          (N, 3) int64       the scene's seed: (base seed, split code, scene index)
@@ -61,7 +63,10 @@ class Scene:
     """One depth image of a heap and its ground truth.
 
     Attributes:
-        depth_m: (H, W) float32 z-depth along the optical axis, metres; 0.0 = no data.
+        depth_m: (H, W) float32 z-depth along the optical axis, metres; 0.0 = no data. What the
+            sensor model returned (the ideal depth with ``sensor=ideal``).
+        depth_clean_m: (H, W) float32 ideal z-depth, metres: ``depth_m`` itself when the
+            artifact has no sensor model. Labels are computed from it.
         mask: (H, W) uint8 instance mask: 0 = not a box, k = ``boxes[k-1]``.
         boxes: the boxes at rest in the bin.
         intrinsics: camera intrinsics (pixels).
@@ -70,6 +75,7 @@ class Scene:
     """
 
     depth_m: np.ndarray
+    depth_clean_m: np.ndarray
     mask: np.ndarray
     boxes: list[Box]
     intrinsics: Intrinsics
@@ -103,6 +109,8 @@ class SceneDataset:
         self.intrinsics = Intrinsics(**self.meta["intrinsics"])
         self.T_world_cam = np.asarray(self.meta["T_world_cam"], dtype=np.float64)
         self.depth_unit = float(self.meta["depth_unit"])
+        # the sensor model of the `depth` images (older artifacts: ideal depth)
+        self.sensor = self.meta.get("sensor", {"name": "ideal", "enabled": False})
         self.box_types = self.meta["box_types"]
         # The bin the scenes were generated in (same fields as ``conf/bin/*.yaml``).
         self.bin = SimpleNamespace(**self.meta["bin"])
@@ -138,8 +146,12 @@ class SceneDataset:
                 T_cam_box=arrays["box_T_cam"][b])
             for j, b in enumerate(range(b0, b1))
         ]
+        depth = arrays["depth"][row].astype(np.float32) * np.float32(self.depth_unit)
+        clean = (arrays["depth_clean"][row].astype(np.float32) * np.float32(self.depth_unit)
+                 if "depth_clean" in arrays else depth)
         return Scene(
-            depth_m=arrays["depth"][row].astype(np.float32) * np.float32(self.depth_unit),
+            depth_m=depth,
+            depth_clean_m=clean,
             mask=arrays["mask"][row],
             boxes=boxes,
             intrinsics=self.intrinsics,

@@ -19,7 +19,9 @@ import numpy as np
 import pybullet as p
 
 from pipeline.camera.geometry import Intrinsics
+from pipeline.camera.depth_filter import preprocess_depth
 from pipeline.camera.render import render_depth
+from pipeline.camera.sensor import apply_sensor_model
 from pipeline.simulation.heap import build_cell, drop_heap, settle
 
 _PARKED = [0.0, 0.0, -50.0]  # where the robot waits while the camera renders
@@ -46,6 +48,7 @@ class PickCell:
         self.robot = robot_factory()
         self.boxes: dict[int, dict] = {}  # body id → {"mass", "size", "type"}
         self.cell_ids: list[int] = []
+        self.sensor_rng: np.random.Generator | None = None  # draws of cfg.sensor's model
 
     def reset(self, rng: np.random.Generator, count: int) -> None:
         """New world: the cell, ``count`` boxes of ``eval_boxes`` dropped and settled, the robot
@@ -79,7 +82,15 @@ class PickCell:
                                  ground=(-self.cfg.bin.floor_thickness, self.cell_ids[0]))
         finally:
             p.resetBasePositionAndOrientation(rid, pos, orn, physicsClientId=cid)
-        return Frame(frame.depth_m, frame.body_ids, T)
+        depth = frame.depth_m
+        if self.cfg.sensor.enabled:  # what the camera returns (pipeline.camera.sensor)
+            if self.sensor_rng is None:
+                raise ValueError("PickCell.sensor_rng is not set: a sensor model needs a "
+                                 "generator (PickRunner.run_trial's rng_sensor)")
+            depth = apply_sensor_model(depth, self.cfg.sensor, self.sensor_rng, self.intrinsics)
+        # preprocessing before planning and servoing (pipeline.camera.depth_filter)
+        depth = preprocess_depth(depth, self.cfg.depth_filter)
+        return Frame(depth, frame.body_ids, T)
 
     def step(self, seconds: float) -> None:
         """Advance the physics by ``seconds`` (rounded to whole time steps, at least one)."""

@@ -161,7 +161,8 @@ class PickRunner:
         self.descriptor_cfg = DescriptorConfig(window=int(s.window),
                                                eps_distance=float(s.eps_distance),
                                                eps_normal=float(s.eps_normal),
-                                               min_pixels=int(s.min_pixels))
+                                               min_pixels=int(s.min_pixels),
+                                               normal_smoothing=int(s.normal_smoothing))
         self.servo_cfg = ServoConfig(gain=float(s.gain), standoff=float(cfg.hand.standoff),
                                      cup_offset=float(cfg.hand.cup_offset),
                                      tolerance_xy=float(s.tolerance_xy),
@@ -474,9 +475,13 @@ class PickRunner:
 
     # ------------------------------------------------------------------ one trial
     def run_trial(self, trial: int, rng_heap: np.random.Generator, rng_plan: np.random.Generator,
-                  keep_trace: bool = False) -> TrialResult:
+                  keep_trace: bool = False,
+                  rng_sensor: np.random.Generator | None = None) -> TrialResult:
+        """One trial. ``rng_sensor``: the sensor model's draws (``cfg.sensor``), a stream of its
+        own so that the heaps and the plans' draws are the same with and without noise."""
         ev = self.cfg.evaluate
         self.cell.reset(rng_heap, int(ev.boxes_per_trial))
+        self.cell.sensor_rng = rng_sensor
         boxes = len(self.cell.boxes)
         attempts: list[Attempt] = []
         failures: dict[int, int] = {}

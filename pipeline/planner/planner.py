@@ -30,6 +30,7 @@ from typing import Callable
 import numpy as np
 import torch
 
+from pipeline.camera.depth_filter import preprocess_depth
 from pipeline.camera.depth_input import check_depth_image
 from pipeline.camera.geometry import Intrinsics
 from pipeline.labelling.types import GraspClass
@@ -136,6 +137,8 @@ class Planner:
         self.norm, self.ranking = norm, ranking
         self.size = net.cfg.input_size
         self.last_reason = ""  # why the last ``plan`` returned [] (NO_GRASP_REASONS), else ""
+        # depth preprocessing in ``plan`` (a ``DepthFilterConfig``; None = none)
+        self.depth_filter = None
 
     @classmethod
     def load(cls, model_dir: Path | str, device: str = "cpu") -> "Planner":
@@ -183,12 +186,14 @@ class Planner:
 
         NaN, ±inf, ≤ 0 and implausible depths are no data (``check_depth_image``); a wrong
         shape (also one that differs from ``intrinsics``), ndim or a non-float dtype raises a
-        ``ValueError``. Every candidate's nearest pixel has data. ``[]`` = no grasp, with the
-        reason in ``self.last_reason``: ``"no_valid_depth"`` (the image has no data at all: the
-        network is not run), ``"no_prediction"`` (no cell above th that is not NG, e.g. an empty
-        bin), ``"no_rankable_candidate"`` (every prediction lacked data or a normal).
+        ``ValueError``. Then ``self.depth_filter``'s preprocessing, if set (hole filling,
+        median; ``pipeline.camera.depth_filter``). Every candidate's nearest pixel has data.
+        ``[]`` = no grasp, with the reason in ``self.last_reason``: ``"no_valid_depth"`` (the
+        image has no data at all: the network is not run), ``"no_prediction"`` (no cell above
+        th that is not NG, e.g. an empty bin), ``"no_rankable_candidate"`` (every prediction
+        lacked data or a normal).
         """
-        depth_m = self._check(depth_m, batch=False)
+        depth_m = preprocess_depth(self._check(depth_m, batch=False), self.depth_filter)
         if (intrinsics.height, intrinsics.width) != depth_m.shape:
             raise ValueError(f"intrinsics are for {intrinsics.width} x {intrinsics.height} "
                              f"images, the depth image is {depth_m.shape[1]} x "

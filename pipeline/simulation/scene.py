@@ -18,7 +18,10 @@ class SimulatedScene:
     """A rendered heap.
 
     Attributes:
-        depth_m: (H, W) float32 z-depth, metres (0 = no data, only with a sensor model).
+        depth_m: (H, W) float32 z-depth, metres, as the sensor returns it (0 = no data; with
+            ``sensor=ideal`` the ideal depth, which has data everywhere).
+        depth_clean_m: (H, W) float32 ideal z-depth, metres (the renderer's; the same array as
+            ``depth_m`` when the sensor model is off).
         mask: (H, W) uint8: 0 = not a box, k = ``boxes[k-1]``.
         boxes: boxes at rest inside the bin, in drop order.
         T_world_cam: (4, 4) camera pose (OpenCV axes) in the world frame.
@@ -26,6 +29,7 @@ class SimulatedScene:
     """
 
     depth_m: np.ndarray
+    depth_clean_m: np.ndarray
     mask: np.ndarray
     boxes: list[BoxPose]
     T_world_cam: np.ndarray
@@ -60,8 +64,9 @@ def simulate_scene(client: int, cfg, rng: np.random.Generator) -> SimulatedScene
         if box.body_id + 1 < len(lut):
             lut[box.body_id + 1] = k
     mask = lut[frame.body_ids + 1]
-    depth = apply_sensor_model(frame.depth_m, cfg.sensor, rng)
-    return SimulatedScene(depth_m=depth, mask=mask, boxes=heap.boxes, T_world_cam=T_world_cam,
+    depth = apply_sensor_model(frame.depth_m, cfg.sensor, rng, intr)
+    return SimulatedScene(depth_m=depth, depth_clean_m=frame.depth_m, mask=mask,
+                          boxes=heap.boxes, T_world_cam=T_world_cam,
                           num_dropped=heap.num_dropped, num_removed=heap.num_removed,
                           settle_steps=heap.settle_steps, settled=heap.settled)
 
