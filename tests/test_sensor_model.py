@@ -288,7 +288,7 @@ def test_quantisation_to_multiples_of_the_step():
     # Neighbouring columns differ by up to 0.5 m over a fraction of a millimetre, so their
     # incidence angles are near 90°: steep dropout and the angle term off here.
     cfg = sensor_cfg(projector_baseline=0.0, edge_dropout_prob=0.0, dropout_angle_deg=90.0,
-                     noise_sigma_theta=0.0)
+                     noise_sigma_theta=0.0, min_range=0.2, max_range=1.5)
     out = apply_sensor_model(z, cfg, np.random.default_rng(3), intr)
     assert out.dtype == np.float32
     kept = np.array([False, False, True, True, True, True, False, False])
