@@ -1,8 +1,11 @@
 """Measured performance figures (``make bench``); prints, never asserts.
 
-Generation throughput with 1 and 2 worker processes, the render time per frame, and the ratio
-of the stage's per-process rate to a bare pybullet loop doing the same work (same cell, same
-trickle drop and rest test, same TinyRenderer frame) measured in the same run. Labelling
+Rendering (``--only render``): ms per frame of the ray-cast renderer and of TinyRenderer on the
+same frames in one run, the rest check (heaps of 20 boxes that move in one more second, settle
+steps), generation scenes/s and the closed loop with each renderer. Generation throughput with 1
+and 2 worker processes and the ratio of the stage's per-process rate to a bare pybullet loop
+doing the same work (same cell, same trickle drop and rest test, same renderer) measured in the
+same run. Labelling
 throughput with 1 and 2 workers on the generated scenes, and its split between surface
 detection and robot checks. Planning time per image of the DCNN (default and paper widths)
 and of the Dex-Net-style planner (GQ-CNN and planarity), GQ-CNN training throughput. The
@@ -16,8 +19,8 @@ sensor model and depth preprocessing (``--only sensor``): time per image of the 
 hole filling and the median, and what they do to the depth of the bench's heaps (pixels
 without data, error against the ideal depth).
 
-    python -m pipeline.bench [--scenes 60] [--render-frames 30]
-                             [--only stages|planners|closed-loop|executors|training|sensor]
+    python -m pipeline.bench [--scenes 60]
+                             [--only stages|render|planners|closed-loop|executors|training|sensor]
                              [--experiment paper] [--root <paths.root>]
 """
 
@@ -39,13 +42,17 @@ def bare_loop(num_scenes: int, cfg, seed: int) -> float:
     """Scenes per second of a minimal settle + render loop (no storage, no logging).
 
     It draws the same heaps as the stage (same seeds, same order of random draws), drops them
-    the same way, applies the same rest test and renders one TinyRenderer frame, so the ratio
-    of the two rates is the stage's overhead.
+    the same way, applies the same rest test (``pipeline.simulation.heap.settle``) and renders
+    one frame with the configured renderer (``camera.renderer``), so the ratio of the two rates
+    is the stage's overhead.
     """
+    from pipeline.camera.geometry import Intrinsics, camera_pose_above_bin
+    from pipeline.camera.render import render_depth
+    from pipeline.simulation.heap import settle
+
     client = p.connect(p.DIRECT)
-    W, H = cfg.camera.width, cfg.camera.height
-    view = p.computeViewMatrix([0, 0, cfg.camera.height_above_bin_floor], [0, 0, 0], [0, 1, 0])
-    proj = p.computeProjectionMatrixFOV(53.6, W / H, cfg.camera.near, cfg.camera.far)
+    intr = Intrinsics.from_config(cfg.camera)
+    T_cam = camera_pose_above_bin(cfg.camera.height_above_bin_floor)
     sizes = [np.asarray(t.size) for t in cfg.boxes.types]
     b, ph = cfg.bin, cfg.physics
     lx, ly, h, t, ft = (b.inner_length_x, b.inner_width_y, b.wall_height, b.wall_thickness,
@@ -56,6 +63,7 @@ def bare_loop(num_scenes: int, cfg, seed: int) -> float:
              ([lx / 2, t / 2, (h + ft) / 2], [0, -(ly + t) / 2, (h - ft) / 2]),
              ([lx / 2, t / 2, (h + ft) / 2], [0, (ly + t) / 2, (h - ft) / 2])]
     hx, hy = lx / 2 - ph.drop_margin, ly / 2 - ph.drop_margin
+    anchor = int(bool(ph.friction_anchor))
     t0 = time.perf_counter()
     for i in range(num_scenes):
         rng = np.random.default_rng([seed, 0, i])
@@ -70,10 +78,14 @@ def bare_loop(num_scenes: int, cfg, seed: int) -> float:
         plane = p.createMultiBody(0, ground, basePosition=[0, 0, -ft - 0.01],
                                   physicsClientId=client)
         p.changeVisualShape(plane, -1, rgbaColor=[1, 1, 1, 0], physicsClientId=client)
+        static = []
         for half, pos in parts:
             col = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client)
             vis = p.createVisualShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client)
-            p.createMultiBody(0, col, vis, basePosition=pos, physicsClientId=client)
+            static.append(p.createMultiBody(0, col, vis, basePosition=pos,
+                                            physicsClientId=client))
+        for body in [plane] + static:
+            p.changeDynamics(body, -1, frictionAnchor=anchor, physicsClientId=client)
         bodies = []
         n = int(rng.integers(cfg.boxes.min_count, cfg.boxes.max_count + 1))
         for j in range(n):
@@ -88,54 +100,97 @@ def bare_loop(num_scenes: int, cfg, seed: int) -> float:
                                             basePosition=[x, y, ph.drop_height_above_bin_floor],
                                             baseOrientation=(q / np.linalg.norm(q)).tolist(),
                                             physicsClientId=client))
+            p.changeDynamics(bodies[-1], -1, frictionAnchor=anchor, physicsClientId=client)
             if j < n - 1:
                 for _ in range(ph.drop_interval_steps):
                     p.stepSimulation(physicsClientId=client)
-        calm, steps = 0, 0
-        while calm < ph.rest_checks_in_a_row and steps < ph.max_settle_steps:
-            for _ in range(ph.rest_check_interval_steps):
-                p.stepSimulation(physicsClientId=client)
-            steps += ph.rest_check_interval_steps
-            vel = [p.getBaseVelocity(body, physicsClientId=client) for body in bodies]
-            still = all(np.linalg.norm(v) < ph.rest_linear_speed
-                        and np.linalg.norm(w) < ph.rest_angular_speed for v, w in vel)
-            calm = calm + 1 if still else 0
-        _, _, _, depth, seg = p.getCameraImage(W, H, view, proj, renderer=p.ER_TINY_RENDERER,
-                                               physicsClientId=client)
-        d = np.asarray(depth, np.float32).reshape(H, W)
-        _ = cfg.camera.far * cfg.camera.near / (cfg.camera.far - (cfg.camera.far - cfg.camera.near) * d)
+        settle(client, bodies, ph, ph.max_settle_steps)
+        render_depth(client, intr, T_cam, cfg.camera.near, cfg.camera.far,
+                     ground=(-ft, plane), renderer=cfg.camera.renderer, bodies=static + bodies)
     rate = num_scenes / (time.perf_counter() - t0)
     p.disconnect(client)
     return rate
 
 
-def render_time_ms(frames: int, cfg) -> float:
-    """Median wall time of one 416 × 416 depth + mask frame of a settled 20-box heap."""
+def render_figures(cfg, num_heaps: int = 6, repeats: int = 5) -> dict[str, float]:
+    """Both renderers on the same frames, interleaved in one run: ``num_heaps`` heaps of 20
+    boxes, each seen from the generation camera and from two closed-loop-like close-up poses
+    (``closeup_poses``). Median ms per 416 × 416 depth + mask frame of each and their ratio."""
     from pipeline.camera.geometry import Intrinsics, camera_pose_above_bin
     from pipeline.camera.render import render_depth
     from pipeline.simulation.heap import build_cell, drop_heap
+    from pipeline.simulation.views import closeup_poses
 
     client = p.connect(p.DIRECT)
-    cell = build_cell(client, cfg.bin, cfg.physics)
-    boxes = dataclasses.replace(cfg.boxes, min_count=20, max_count=20)
-    drop_heap(client, np.random.default_rng(0), boxes, cfg.bin, cfg.physics)
     intr = Intrinsics.from_config(cfg.camera)
-    T = camera_pose_above_bin(cfg.camera.height_above_bin_floor)
-    times = []
-    for _ in range(frames):
-        t0 = time.perf_counter()
-        render_depth(client, intr, T, cfg.camera.near, cfg.camera.far,
-                     ground=(-cfg.bin.floor_thickness, cell[0]))
-        times.append(time.perf_counter() - t0)
+    boxes = dataclasses.replace(cfg.boxes, min_count=20, max_count=20)
+    times: dict[str, list[float]] = {"tinyrenderer": [], "raycast": []}
+    for i in range(num_heaps):
+        cell = build_cell(client, cfg.bin, cfg.physics)
+        heap = drop_heap(client, np.random.default_rng([BENCH_SEED, 5, i]), boxes, cfg.bin,
+                         cfg.physics)
+        poses = [camera_pose_above_bin(cfg.camera.height_above_bin_floor)] + closeup_poses(
+            heap.boxes, np.random.default_rng([BENCH_SEED, 6, i]), (0.15, 0.3))
+        for T in poses:
+            for _ in range(repeats):
+                for name in times:
+                    t0 = time.perf_counter()
+                    render_depth(client, intr, T, cfg.camera.near, cfg.camera.far,
+                                 ground=(-cfg.bin.floor_thickness, cell[0]), renderer=name)
+                    times[name].append(time.perf_counter() - t0)
     p.disconnect(client)
-    return 1000 * float(np.median(times))
+    out = {f"render_{k}_ms_per_frame": 1000 * float(np.median(v)) for k, v in times.items()}
+    out["render_raycast_speedup"] = (out["render_tinyrenderer_ms_per_frame"]
+                                     / out["render_raycast_ms_per_frame"])
+    n = len(times["raycast"]) // repeats
+    print(f"render: {out['render_raycast_ms_per_frame']:.1f} ms per frame, "
+          f"{out['render_raycast_speedup']:.1f}x TinyRenderer (same heaps, same run; "
+          f"TinyRenderer {out['render_tinyrenderer_ms_per_frame']:.1f} ms; {n} frames of "
+          f"{num_heaps} 20-box heaps, overhead and close-up poses, 416x416 depth + mask)")
+    return out
+
+
+def rest_figures(cfg, num_heaps: int = 24) -> dict[str, float]:
+    """Heaps of 20 boxes dropped as the generation stage drops them: settle steps, and how many
+    heaps still have a box corner moving more than 2 mm in one more simulated second (the
+    check of ``tests/test_generate.py::test_heaps_of_20_really_at_rest``, same seeds)."""
+    from pipeline.simulation.heap import build_cell, corner_drift, drop_heap
+
+    client = p.connect(p.DIRECT)
+    boxes = dataclasses.replace(cfg.boxes, min_count=20, max_count=20)
+    steps, drift, capped = [], [], 0
+    one_second = int(round(1.0 / cfg.physics.time_step))
+    for i in range(num_heaps):
+        build_cell(client, cfg.bin, cfg.physics)
+        heap = drop_heap(client, rest_check_rng(i), boxes, cfg.bin, cfg.physics)
+        steps.append(heap.settle_steps)
+        capped += not heap.settled
+        drift.append(float(corner_drift(client, [b.body_id for b in heap.boxes],
+                                        one_second).max()))
+    p.disconnect(client)
+    moving = int(sum(d > 0.002 for d in drift))
+    out = {"rest_heaps": num_heaps, "rest_heaps_moving_over_2mm": moving,
+           "rest_worst_drift_mm": 1000 * max(drift), "rest_settle_steps_median":
+           float(np.median(steps)), "rest_settle_steps_max": float(max(steps)),
+           "rest_heaps_at_step_cap": capped}
+    print(f"heaps at rest: {num_heaps - moving} of {num_heaps} heaps of 20 boxes move no corner "
+          f"more than 2 mm in one more second (worst {out['rest_worst_drift_mm']:.2f} mm); "
+          f"settle steps median {out['rest_settle_steps_median']:.0f}, max "
+          f"{out['rest_settle_steps_max']:.0f}; {capped} at the step cap")
+    return out
+
+
+def rest_check_rng(index: int) -> np.random.Generator:
+    """The heaps of the rest check (bench and slow test): seeds (BENCH_SEED, 7, index)."""
+    return np.random.default_rng([BENCH_SEED, 7, index])
 
 
 BENCH_SEED = 12345
 
 
-def stage_rates(num_scenes: int, root: str, executors: tuple[str, ...] = ("local",)
-                ) -> dict[str, float]:
+def stage_rates(num_scenes: int, root: str, executors: tuple[str, ...] = ("local",),
+                workers_list: tuple[int, ...] = (1, 2), extra: tuple[str, ...] = (),
+                label: bool = True) -> dict[str, float]:
     """Scenes per second of ``pipeline.generate`` and ``pipeline.label`` with 1 and 2 workers
     (simulation + storage; labelling = surfaces + hand + robot checks), from their manifests.
     Keys ``generate_2w_scenes_per_s`` (local executor), ``generate_ray_2w_scenes_per_s`` (ray:
@@ -143,7 +198,7 @@ def stage_rates(num_scenes: int, root: str, executors: tuple[str, ...] = ("local
     from pipeline.artifacts.store import load_manifest
     from pipeline.cli import compose
     from pipeline.generate import generate
-    from pipeline.label import label
+    from pipeline.label import label as label_stage
 
     def cfg(stage: str, workers: int, sub: str, executor: str = "local"):
         return compose(stage, [f"executor={executor}",
@@ -151,15 +206,17 @@ def stage_rates(num_scenes: int, root: str, executors: tuple[str, ...] = ("local
             "generate.num_val_scenes=0", "generate.num_test_scenes=0",
             "generate.scenes_per_shard=10", f"generate.workers={workers}",
             f"label.workers={workers}", "logging.max_logged_scenes=0", "logging.progress=false",
-            f"seed={BENCH_SEED}",
+            f"seed={BENCH_SEED}", *extra,
         ])
 
     out = {}
-    for executor, workers in [(e, w) for e in executors for w in (1, 2)]:
+    for executor, workers in [(e, w) for e in executors for w in workers_list]:
         key = f"{workers}w" if executor == "local" else f"{executor}_{workers}w"
         gen = load_manifest(generate(cfg("generate", workers, key, executor)))
         out[f"generate_{key}_scenes_per_s"] = gen["timings"]["scenes_per_s"]
-        lab = load_manifest(label(cfg("label", workers, key, executor)))
+        if not label:
+            continue
+        lab = load_manifest(label_stage(cfg("label", workers, key, executor)))
         out[f"label_{key}_scenes_per_s"] = lab["timings"]["scenes_per_s"]
         if workers == 1 and executor == "local":
             out["label_surfaces_ms_per_scene"] = 1000 * lab["timings"]["surface_detection_s_per_scene"]
@@ -462,10 +519,13 @@ def dexnet_figures(cfg, num_images: int = 6) -> dict[str, float]:
     return out
 
 
-def closed_loop_figures(cfg_name: str = "evaluate") -> dict[str, float]:
-    """Closed loop: the descriptor's time per 416 x 416 frame, and one trial of 3 boxes driven by
+def closed_loop_figures(cfg_name: str = "evaluate", renderer: str | None = None,
+                        descriptor: bool = True, boxes: int = 3) -> dict[str, float]:
+    """Closed loop: the descriptor's time per 416 x 416 frame, and one trial of ``boxes`` driven by
     the training-free Dex-Net-style planarity planner (no artifact needed): control-loop rate
-    (wall), simulated seconds per wall second, wall time of the trial."""
+    (wall), simulated seconds per wall second, wall time of the trial, and where a control step's
+    wall time goes (median ms per call of each part). ``renderer``: ``camera.renderer`` (None:
+    the configured one); keys carry its name when given."""
     import torch
 
     from pipeline.cli import compose
@@ -477,36 +537,91 @@ def closed_loop_figures(cfg_name: str = "evaluate") -> dict[str, float]:
     from pipeline.servo.descriptor import DescriptorConfig, describe_surface
 
     torch.set_num_threads(1)
-    cfg = compose(cfg_name, ["experiment=default", "evaluate.boxes_per_trial=3",
-                             "evaluate.dexnet_variant=planarity"])
+    extra = [f"camera.renderer={renderer}"] if renderer else []
+    cfg = compose(cfg_name, ["experiment=default", f"evaluate.boxes_per_trial={boxes}",
+                             "evaluate.dexnet_variant=planarity", *extra])
     cell = PickCell(cfg, lambda: Robot(robot_config(cfg)))
     dex = DexNetPlanner.from_config(cfg, "planarity", cell.robot.home_camera_pose())
     runner = PickRunner(cfg, cell, lambda d, i, rng: dex.plan(d, i, rng=rng), "dexnet")
-    cell.reset(np.random.default_rng([BENCH_SEED, 31, 0]), 3)
-    frame = cell.render()
-    ys, xs = np.nonzero(np.isin(frame.body_ids, list(cell.boxes)))
-    seed = np.array([xs[len(xs) // 2], ys[len(ys) // 2]], np.float64)
-    dcfg = DescriptorConfig()
-    times = []
-    for _ in range(20):
-        t0 = time.perf_counter()
-        describe_surface(frame.depth_m, cell.intrinsics, seed, dcfg)
-        times.append(time.perf_counter() - t0)
-    out = {"descriptor_ms_per_frame": 1000 * float(np.median(times))}
-    print(f"surface descriptor, 416x416 frame: {out['descriptor_ms_per_frame']:.1f} ms")
+    out: dict[str, float] = {}
+    if descriptor:
+        cell.reset(np.random.default_rng([BENCH_SEED, 31, 0]), boxes)
+        frame = cell.render()
+        ys, xs = np.nonzero(np.isin(frame.body_ids, list(cell.boxes)))
+        seed = np.array([xs[len(xs) // 2], ys[len(ys) // 2]], np.float64)
+        dcfg = DescriptorConfig()
+        times = []
+        for _ in range(20):
+            t0 = time.perf_counter()
+            describe_surface(frame.depth_m, cell.intrinsics, seed, dcfg)
+            times.append(time.perf_counter() - t0)
+        out["descriptor_ms_per_frame"] = 1000 * float(np.median(times))
+        print(f"surface descriptor, 416x416 frame: {out['descriptor_ms_per_frame']:.1f} ms")
     t0 = time.perf_counter()
     result = runner.run_trial(0, np.random.default_rng([BENCH_SEED, 31, 0]),
                               np.random.default_rng([BENCH_SEED, 37, 0]))
     wall = time.perf_counter() - t0
-    steps = runner.timings["control_step_s"]
-    out["control_loop_hz"] = 1.0 / float(np.median(steps)) if steps else float("nan")
-    out["sim_s_per_wall_s"] = result.sim_s / wall
-    out["trial_3_boxes_wall_s"] = wall
-    print(f"closed loop: control loop {out['control_loop_hz']:.1f} Hz (wall; render + "
-          f"descriptor + servo + Jacobian + physics), {out['sim_s_per_wall_s']:.2f} simulated s "
-          f"per wall s; one 3-box trial {wall:.1f} s wall ({result.picked}/{result.boxes} picked "
-          f"in {len(result.attempts)} attempts, {result.sim_s:.1f} s simulated)")
     cell.close()
+    tm = runner.timings
+    sfx = f"_{renderer}" if renderer else ""
+    steps = tm["control_step_s"]
+    out[f"control_loop_hz{sfx}"] = 1.0 / float(np.median(steps)) if steps else float("nan")
+    out[f"sim_s_per_wall_s{sfx}"] = result.sim_s / wall
+    out[f"trial_{boxes}_boxes_wall_s{sfx}"] = wall
+    parts = {"render": "render_s", "descriptor": "descriptor_s", "control law": "control_law_s",
+             "Jacobian + joint update": "jacobian_s", "physics": "physics_s",
+             "collision check": "collision_s"}
+    ms = {k: 1000 * float(np.median(tm[v])) if tm[v] else 0.0 for k, v in parts.items()}
+    for k, v in parts.items():
+        out[f"step_{v[:-2]}_ms{sfx}"] = ms[k]
+    name = renderer or str(cfg.camera.renderer)
+    print(f"closed loop ({name}): control loop {out[f'control_loop_hz{sfx}']:.1f} Hz (wall), "
+          f"{out[f'sim_s_per_wall_s{sfx}']:.2f} simulated s per wall s; one {boxes}-box trial "
+          f"{wall:.1f} s wall ({result.picked}/{result.boxes} picked in {len(result.attempts)} "
+          f"attempts, {result.sim_s:.1f} s simulated)")
+    print(f"  control step {1000 * float(np.median(steps)) if steps else float('nan'):.1f} ms "
+          "(median): " + ", ".join(f"{k} {v:.1f} ms" for k, v in ms.items()))
+    return out
+
+
+def render_group(cfg, num_scenes: int) -> dict[str, float]:
+    """``--only render``: both renderers on the same frames, the rest check, generation scenes/s
+    (stage, 1 worker, and the bare loop) and the closed loop with each renderer (one trial of
+    the evaluation's size, the planarity planner, one process)."""
+    from pipeline.cli import compose
+
+    out = render_figures(cfg)
+    out.update(rest_figures(cfg))
+    # best of two alternating runs of each: on a shared 2-core machine single runs of a few
+    # seconds scatter by about ±15 %
+    for rep in range(2):
+        for name in ("tinyrenderer", "raycast"):
+            rc = dataclasses.replace(cfg, camera=dataclasses.replace(cfg.camera, renderer=name))
+            with tempfile.TemporaryDirectory() as root:
+                rates = stage_rates(num_scenes, root, workers_list=(1,),
+                                    extra=(f"camera.renderer={name}",), label=False)
+            for key, rate in ((f"generate_1w_scenes_per_s_{name}",
+                               rates["generate_1w_scenes_per_s"]),
+                              (f"bare_loop_scenes_per_s_{name}",
+                               bare_loop(num_scenes, rc, BENCH_SEED))):
+                out[key] = max(out.get(key, 0.0), rate)
+    for name in ("tinyrenderer", "raycast"):
+        out[f"stage_vs_bare_{name}"] = (out[f"generate_1w_scenes_per_s_{name}"]
+                                        / out[f"bare_loop_scenes_per_s_{name}"])
+        print(f"generation ({name}), 1 worker, best of 2: "
+              f"{out[f'generate_1w_scenes_per_s_{name}']:.2f} scenes/s; bare loop "
+              f"{out[f'bare_loop_scenes_per_s_{name}']:.2f} scenes/s; stage / bare "
+              f"{out[f'stage_vs_bare_{name}']:.2f} (target >= 0.90)")
+    out["generate_raycast_speedup"] = (out["generate_1w_scenes_per_s_raycast"]
+                                       / out["generate_1w_scenes_per_s_tinyrenderer"])
+    print(f"generation speed-up of the ray-cast renderer: {out['generate_raycast_speedup']:.2f}x")
+    boxes = int(compose("evaluate", ["experiment=default"]).evaluate.boxes_per_trial)
+    for name in ("tinyrenderer", "raycast"):
+        out.update(closed_loop_figures(renderer=name, descriptor=False, boxes=boxes))
+    out["closed_loop_raycast_speedup"] = (out["sim_s_per_wall_s_raycast"]
+                                          / out["sim_s_per_wall_s_tinyrenderer"])
+    print(f"closed-loop speed-up of the ray-cast renderer: "
+          f"{out['closed_loop_raycast_speedup']:.2f}x (target: >= 2 simulated s per wall s)")
     return out
 
 
@@ -579,9 +694,8 @@ def main(argv: list[str] | None = None) -> int:
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", type=int, default=60, help="scenes per throughput run")
-    parser.add_argument("--render-frames", type=int, default=30)
-    parser.add_argument("--only", choices=("all", "stages", "planners", "closed-loop", "executors",
-                                           "training", "sensor"),
+    parser.add_argument("--only", choices=("all", "stages", "render", "planners", "closed-loop",
+                                           "executors", "training", "sensor"),
                         default="all", help="run one group of figures")
     parser.add_argument("--experiment", default="paper",
                         help="--only training: whose latest label artifact to load (paper)")
@@ -607,6 +721,10 @@ def main(argv: list[str] | None = None) -> int:
               f"{mem['train_images_per_s']:.2f} images/s)")
         print(json.dumps({k: round(v, 3) if isinstance(v, float) else v for k, v in mem.items()}))
         return 0
+    if args.only == "render":
+        results.update(render_group(cfg, args.scenes))
+        print(json.dumps({k: round(v, 3) for k, v in results.items()}))
+        return 0
     if args.only == "sensor":
         results.update(sensor_figures())
         print(json.dumps({k: round(v, 4) for k, v in results.items()}))
@@ -623,8 +741,8 @@ def main(argv: list[str] | None = None) -> int:
             results.update(closed_loop_figures())
         print(json.dumps({k: round(v, 3) for k, v in results.items()}))
         return 0
-    results["render_ms_per_frame"] = render_time_ms(args.render_frames, cfg)
-    print(f"render, 416x416 depth + mask, 20 boxes: {results['render_ms_per_frame']:.1f} ms/frame")
+    results.update(render_figures(cfg))
+    results.update(rest_figures(cfg))
     results["bare_loop_scenes_per_s"] = bare_loop(args.scenes, cfg, BENCH_SEED)
     print(f"bare pybullet loop, 1 process:          {results['bare_loop_scenes_per_s']:.2f} scenes/s")
     with tempfile.TemporaryDirectory() as root:

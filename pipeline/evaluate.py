@@ -48,6 +48,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from pipeline.artifacts import compute_version, resolve_artifact, run_stage, stage_config
 from pipeline.artifacts.store import StageRun
+from pipeline.camera.render import check_renderer
 from pipeline.cli import CONF_DIR, data_root, stage_main
 from pipeline.executor import map_shards, resolve_workers
 from pipeline.picking.trial import OUTCOMES, TRIAL_ENDS, PickRunner, TrialResult
@@ -255,6 +256,7 @@ def evaluate(cfg: DictConfig) -> Path:
             raise ValueError(f"evaluate.planners has {name!r}: choose from {PLANNERS}")
     if int(cfg.evaluate.num_trials) < 1:
         raise ValueError(f"evaluate.num_trials must be >= 1, got {cfg.evaluate.num_trials}")
+    check_renderer(str(cfg.camera.renderer))
     upstream, train_dir, baseline_dir = {}, None, None
     if "dcnn" in planners:
         train_dir = resolve_artifact(Path(cfg.paths.models), "train", cfg.evaluate.train_version,

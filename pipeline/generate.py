@@ -33,6 +33,7 @@ from pipeline.artifacts.store import StageRun
 from pipeline.camera.geometry import (
     Intrinsics, camera_pose_above_bin, pose_matrix, quat_from_matrix,
 )
+from pipeline.camera.render import check_renderer
 from pipeline.cli import CONF_DIR, data_root, stage_main
 from pipeline.dataset.scenes import SPLIT_CODES, SPLITS, SceneDataset
 from pipeline.dataset.storage import read_npz, write_npz
@@ -237,6 +238,7 @@ def generate(cfg: DictConfig) -> Path:
     sizes = split_sizes(cfg_obj.generate)
     if not cfg_obj.boxes.types:
         raise ValueError("boxes.types is empty: the box set needs at least one box type")
+    check_renderer(cfg_obj.camera.renderer)
     workers = resolve_workers(cfg_obj.generate.workers, cfg_obj.executor)
 
     def body(run: StageRun) -> None:
@@ -251,6 +253,7 @@ def generate(cfg: DictConfig) -> Path:
             "intrinsics": intr.as_dict(),
             "T_world_cam": T_world_cam.tolist(),
             "depth_unit": cfg_obj.generate.depth_unit,
+            "renderer": cfg_obj.camera.renderer,  # how the ideal depth was rendered
             # the sensor model of `depth`; with one, shards also hold the ideal `depth_clean`
             "sensor": OmegaConf.to_container(cfg.sensor, resolve=True),
             "frames": {"camera": "OpenCV: x right, y down, z forward; metres",

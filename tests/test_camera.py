@@ -18,7 +18,7 @@ SR300 = Intrinsics(416, 416, 411.7, 411.7, 207.5, 207.5)
 CAM_HEIGHT = 0.625
 BIN = NS(inner_length_x=0.40, inner_width_y=0.30, wall_height=0.15, wall_thickness=0.01,
          floor_thickness=0.02, lateral_friction=0.5)
-PHYS = NS(gravity=-9.81, time_step=1 / 240, solver_iterations=50)
+PHYS = NS(gravity=-9.81, time_step=1 / 240, solver_iterations=50, friction_anchor=True)
 
 
 @pytest.fixture
@@ -60,11 +60,15 @@ def test_camera_pose_looks_down():
     assert world_to_camera(np.array([0.1, 0.2, 0]), T) == pytest.approx([0.1, -0.2, CAM_HEIGHT])
 
 
-def test_floor_and_ground_depth(client):
+RENDERERS = ["tinyrenderer", "raycast"]
+
+
+@pytest.mark.parametrize("renderer", RENDERERS)
+def test_floor_and_ground_depth(client, renderer):
     build_cell(client, BIN, PHYS)
     ground = p.getBodyUniqueId(0, physicsClientId=client)
     frame = render_depth(client, SR300, camera_pose_above_bin(CAM_HEIGHT), 0.1, 2.0,
-                         ground=(-BIN.floor_thickness, ground))
+                         ground=(-BIN.floor_thickness, ground), renderer=renderer)
     # Bin floor straight below: 0.625 m to 1 mm (the issue's requirement; in fact ~1e-6 m).
     assert abs(frame.depth_m[208, 208] - 0.625) < 1e-3
     # Image corner sees the ground, 20 mm below the bin floor (filled analytically).
@@ -72,13 +76,14 @@ def test_floor_and_ground_depth(client):
     assert frame.body_ids[0, 0] == ground
 
 
-def test_box_top_height_and_corner_pixel(client):
+@pytest.mark.parametrize("renderer", RENDERERS)
+def test_box_top_height_and_corner_pixel(client, renderer):
     """A 0.12 × 0.075 × 0.023 m box lying flat on the floor at (0.03, −0.02)."""
     build_cell(client, BIN, PHYS)
     half = [0.06, 0.0375, 0.0115]
     box = _static_box(client, half, [0.03, -0.02, 0.0115])
     T = camera_pose_above_bin(CAM_HEIGHT)
-    frame = render_depth(client, SR300, T, 0.1, 2.0)
+    frame = render_depth(client, SR300, T, 0.1, 2.0, renderer=renderer)
     mask = frame.body_ids == box
     # Box top at 0.023 m above the floor: depth 0.625 - 0.023 = 0.602 m.
     assert np.median(frame.depth_m[mask]) == pytest.approx(0.602, abs=1e-4)
@@ -96,8 +101,9 @@ def test_box_top_height_and_corner_pixel(client):
                                           abs=2e-3)
 
 
+@pytest.mark.parametrize("renderer", RENDERERS)
 @pytest.mark.parametrize("axis", ["x", "y"])
-def test_raster_samples_pixel_centres(client, axis):
+def test_raster_samples_pixel_centres(client, axis, renderer):
     """Render a plane tilted 25° and solve, per pixel, which ray the renderer sampled.
 
     For a plane n·X = d in the camera frame, the depth z at normalised image coordinates
@@ -109,7 +115,7 @@ def test_raster_samples_pixel_centres(client, axis):
     quat = p.getQuaternionFromEuler([angle, 0, 0] if axis == "x" else [0, angle, 0])
     centre = np.array([0.0, 0.0, 0.1])
     _static_box(client, [0.5, 0.5, 0.01], centre.tolist(), quat)
-    frame = render_depth(client, SR300, T, 0.1, 2.0)
+    frame = render_depth(client, SR300, T, 0.1, 2.0, renderer=renderer)
     R = pose_matrix(centre, np.asarray(quat))[:3, :3]
     n_cam = np.linalg.inv(T)[:3, :3] @ R[:, 2]
     d = n_cam @ world_to_camera(centre + 0.01 * R[:, 2], T)

@@ -273,7 +273,8 @@ def test_csv_tables_agree_with_dataset(root_a: Path, report_a: Path) -> None:
         n = counts.get(r["box type"], 0)
         assert int(r["boxes"]) == n
         if n:
-            assert float(r[area_col]) == pytest.approx(pixels[r["box type"]] / n, abs=0.05)
+            # the table rounds to 0.1 px: the same rounding of the dataset's own mean
+            assert float(r[area_col]) == round(pixels[r["box type"]] / n, 1)
     # the artifact's copies are the published ones
     for name in ("dataset_splits.csv", "box_types.csv"):
         assert (report_a / "tables" / name).read_bytes() == (tables / name).read_bytes()

@@ -30,7 +30,7 @@ CAM_HEIGHT = 0.625
 T_WORLD_CAM = camera_pose_above_bin(CAM_HEIGHT)
 BIN = NS(inner_length_x=0.40, inner_width_y=0.30, wall_height=0.15, wall_thickness=0.01,
          floor_thickness=0.02, lateral_friction=0.5)
-PHYS = NS(gravity=-9.81, time_step=1 / 240, solver_iterations=50)
+PHYS = NS(gravity=-9.81, time_step=1 / 240, solver_iterations=50, friction_anchor=True)
 FLAT = (0.12, 0.075, 0.023)
 
 

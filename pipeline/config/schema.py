@@ -50,6 +50,7 @@ class CameraConfig:
     height_above_bin_floor: float = 0.625
     near: float = 0.1
     far: float = 2.0
+    renderer: str = "raycast"  # "raycast" | "tinyrenderer" (pipeline.camera.render)
 
 
 @dataclass
@@ -94,10 +95,10 @@ class PhysicsConfig:
     drop_height_above_bin_floor: float = 0.625
     drop_interval_steps: int = 20  # "trickle": one box every N steps
     drop_margin: float = 0.03  # keep drop xy this far inside the bin walls
-    rest_linear_speed: float = 0.005  # m/s
-    rest_angular_speed: float = 0.05  # rad/s
+    friction_anchor: bool = True  # Bullet friction anchors on every box and bin part
     rest_check_interval_steps: int = 10
-    rest_checks_in_a_row: int = 5
+    rest_window_steps: int = 60  # at rest: over this many steps ...
+    rest_corner_displacement: float = 0.0005  # m: ... no box corner moved farther than this
     max_settle_steps: int = 3000
 
 

@@ -7,8 +7,9 @@ metres, kilograms, seconds. Camera frame: OpenCV (x right, y down, z forward).
 
 The robot is position-controlled: its joints are set every control step (``Robot.set_joints``)
 and the boxes follow the physics. A held box hangs on a constraint (``pipeline.picking.suction``).
-The camera renders only the bin and the boxes: the robot is moved out of the way for the
-duration of a render (a real hand's cups are outside the camera's view of the surface).
+The camera renders only the bin and the boxes (a real hand's cups are outside the camera's view
+of the surface): the ray-cast renderer is given just those bodies; for pybullet's rasteriser
+the robot is moved out of the way for the duration of a render.
 """
 
 from __future__ import annotations
@@ -72,16 +73,20 @@ class PickCell:
 
     def render(self, T_world_cam: np.ndarray | None = None) -> Frame:
         """Depth and body ids from the hand camera (or from ``T_world_cam``)."""
-        cid, rid = self.client, self.robot.body_id
+        cid, rid, cam = self.client, self.robot.body_id, self.cfg.camera
         T = self.robot.camera_pose() if T_world_cam is None else T_world_cam
-        pos, orn = p.getBasePositionAndOrientation(rid, physicsClientId=cid)
-        p.resetBasePositionAndOrientation(rid, _PARKED, orn, physicsClientId=cid)
-        try:
-            frame = render_depth(cid, self.intrinsics, T, self.cfg.camera.near,
-                                 self.cfg.camera.far,
-                                 ground=(-self.cfg.bin.floor_thickness, self.cell_ids[0]))
-        finally:
-            p.resetBasePositionAndOrientation(rid, pos, orn, physicsClientId=cid)
+        ground = (-self.cfg.bin.floor_thickness, self.cell_ids[0])
+        if cam.renderer == "raycast":  # draws the bin and the boxes only: no need to park
+            frame = render_depth(cid, self.intrinsics, T, cam.near, cam.far, ground=ground,
+                                 renderer="raycast", bodies=self.obstacles)
+        else:
+            pos, orn = p.getBasePositionAndOrientation(rid, physicsClientId=cid)
+            p.resetBasePositionAndOrientation(rid, _PARKED, orn, physicsClientId=cid)
+            try:
+                frame = render_depth(cid, self.intrinsics, T, cam.near, cam.far, ground=ground,
+                                     renderer=cam.renderer)
+            finally:
+                p.resetBasePositionAndOrientation(rid, pos, orn, physicsClientId=cid)
         depth = frame.depth_m
         if self.cfg.sensor.enabled:  # what the camera returns (pipeline.camera.sensor)
             if self.sensor_rng is None:

@@ -180,8 +180,10 @@ class PickRunner:
         self.gripper_factory = lambda: SuctionGripper(cell.client, cell.robot, self.suction_cfg,
                                                       float(cfg.hand.cup_offset))
         self._place_q: np.ndarray | None = None
-        self.timings: dict[str, list[float]] = {"descriptor_s": [], "control_step_s": [],
-                                                "render_s": []}
+        # wall time of the parts of a control step (seconds, one entry per call)
+        self.timings: dict[str, list[float]] = {
+            "descriptor_s": [], "control_step_s": [], "render_s": [], "control_law_s": [],
+            "jacobian_s": [], "physics_s": [], "collision_s": []}
 
     # ------------------------------------------------------------------ helpers
     def _pattern(self, cand, frame: Frame | None = None, target: int = -1) -> str:
@@ -274,11 +276,15 @@ class PickRunner:
         from pipeline.servo.jacobian import camera_jacobian, integrate, joint_velocities
 
         robot = self.cell.robot
+        t0 = time.perf_counter()
         J = camera_jacobian(robot, q)
         qdot = joint_velocities(J, twist_cam, float(self.cfg.servo.joint_damping))
         q_next, clamped = integrate(robot, q, qdot, self.dt, float(self.cfg.motion.max_joint_speed))
         robot.set_joints(q_next)
+        t1 = time.perf_counter()
         self.cell.step(self.dt)
+        self.timings["jacobian_s"].append(t1 - t0)
+        self.timings["physics_s"].append(time.perf_counter() - t1)
         return q_next, clamped
 
     def _stop_bodies(self) -> list[int]:
@@ -290,8 +296,10 @@ class PickRunner:
 
     def _collides(self, q: np.ndarray, target: int) -> bool:
         ignore = [target] if target >= 0 else []
-        return bool(self.cell.robot.in_collision(None, self._stop_bodies(),
-                                                 ignore_body_ids=ignore))
+        t0 = time.perf_counter()
+        hit = bool(self.cell.robot.in_collision(None, self._stop_bodies(), ignore_body_ids=ignore))
+        self.timings["collision_s"].append(time.perf_counter() - t0)
+        return hit
 
     def _place_joints(self) -> np.ndarray:
         """Joints of the conveyor pose (camera at ``motion.place_position`` looking down)."""
@@ -367,8 +375,10 @@ class PickRunner:
                 seed = None  # g′ of this frame, carried to the next (below)
             g_world = frame.T_world_cam[:3, :3] @ np.asarray(feats.center_cam) + \
                 frame.T_world_cam[:3, 3]
+            tc = time.perf_counter()
             cmd = servo_velocity(centre, feats.normal_cam, feats.warped_long, feats.warped_short,
                                  pattern, self.servo_cfg, self.dt)
+            self.timings["control_law_s"].append(time.perf_counter() - tc)
             if trace is not None:
                 trace.append({"attempt": index, "step": step, "t": att.servo_s,
                               "T_world_cam": frame.T_world_cam.copy(),

@@ -43,12 +43,14 @@ class HeapResult:
     settled: bool  # False when max_settle_steps was reached first
 
 
-def _static_box(client: int, half_extents, position, rgba, friction: float) -> int:
+def _static_box(client: int, half_extents, position, rgba, friction: float,
+                anchor: bool) -> int:
     col = p.createCollisionShape(p.GEOM_BOX, halfExtents=half_extents, physicsClientId=client)
     vis = p.createVisualShape(p.GEOM_BOX, halfExtents=half_extents, rgbaColor=rgba,
                               physicsClientId=client)
     body = p.createMultiBody(0.0, col, vis, basePosition=position, physicsClientId=client)
-    p.changeDynamics(body, -1, lateralFriction=friction, physicsClientId=client)
+    p.changeDynamics(body, -1, lateralFriction=friction, frictionAnchor=int(anchor),
+                     physicsClientId=client)
     return body
 
 
@@ -68,22 +70,22 @@ def build_cell(client: int, bin_cfg, physics_cfg) -> list[int]:
     )
     t, ft = bin_cfg.wall_thickness, bin_cfg.floor_thickness
     lx, ly, h = bin_cfg.inner_length_x, bin_cfg.inner_width_y, bin_cfg.wall_height
-    fr = bin_cfg.lateral_friction
+    fr, anchor = bin_cfg.lateral_friction, bool(physics_cfg.friction_anchor)
     blue = [0.2, 0.3, 0.8, 1]
     bodies = [
         # Ground: a collision slab, drawn invisible; the renderer fills its depth analytically
         # (see pipeline.camera.render.render_depth(ground=...)).
-        _static_box(client, [1.0, 1.0, 0.01], [0, 0, -ft - 0.01], [1, 1, 1, 0], fr),
-        _static_box(client, [lx / 2 + t, ly / 2 + t, ft / 2], [0, 0, -ft / 2], blue, fr),
+        _static_box(client, [1.0, 1.0, 0.01], [0, 0, -ft - 0.01], [1, 1, 1, 0], fr, anchor),
+        _static_box(client, [lx / 2 + t, ly / 2 + t, ft / 2], [0, 0, -ft / 2], blue, fr, anchor),
     ]
     wall_z = (h - ft) / 2.0  # walls run from the ground up to h above the bin floor
     half_h = (h + ft) / 2.0
     for sx in (-1, 1):
         bodies.append(_static_box(client, [t / 2, ly / 2 + t, half_h],
-                                  [sx * (lx / 2 + t / 2), 0, wall_z], blue, fr))
+                                  [sx * (lx / 2 + t / 2), 0, wall_z], blue, fr, anchor))
     for sy in (-1, 1):
         bodies.append(_static_box(client, [lx / 2, t / 2, half_h],
-                                  [0, sy * (ly / 2 + t / 2), wall_z], blue, fr))
+                                  [0, sy * (ly / 2 + t / 2), wall_z], blue, fr, anchor))
     return bodies
 
 
@@ -94,35 +96,75 @@ def random_quaternion(rng: np.random.Generator) -> np.ndarray:
     return q if q[3] >= 0 else -q
 
 
-def _is_at_rest(client: int, body_ids: list[int], lin: float, ang: float) -> bool:
-    for body in body_ids:
-        v, w = p.getBaseVelocity(body, physicsClientId=client)
-        if v[0] * v[0] + v[1] * v[1] + v[2] * v[2] > lin * lin:
-            return False
-        if w[0] * w[0] + w[1] * w[1] + w[2] * w[2] > ang * ang:
-            return False
-    return True
+_UNIT_CORNERS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)],
+                         np.float64)
+
+
+def box_corners(client: int, body_ids: list[int], half_extents: np.ndarray) -> np.ndarray:
+    """(n, 8, 3) world positions of the corners of boxes ``body_ids`` now, metres.
+
+    ``half_extents``: (n, 3) half edge lengths of each box along its own axes.
+    """
+    states = [p.getBasePositionAndOrientation(b, physicsClientId=client) for b in body_ids]
+    pos = np.array([s[0] for s in states], np.float64).reshape(-1, 3)
+    x, y, z, w = np.array([s[1] for s in states], np.float64).reshape(-1, 4).T
+    R = np.stack([  # rotation matrices of the quaternions (x, y, z, w), (n, 3, 3)
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+    ], -2)
+    local = _UNIT_CORNERS[None] * np.asarray(half_extents, np.float64)[:, None, :]  # (n, 8, 3)
+    return np.einsum("nij,nkj->nki", R, local) + pos[:, None, :]
+
+
+def _half_extents(client: int, body_ids: list[int]) -> np.ndarray:
+    """(n, 3) half extents of each body's (box) collision shape, metres."""
+    return np.array([p.getCollisionShapeData(b, -1, physicsClientId=client)[0][3]
+                     for b in body_ids], np.float64).reshape(-1, 3) / 2.0
 
 
 def settle(client: int, body_ids: list[int], physics_cfg, max_steps: int) -> tuple[int, bool]:
-    """Step until every body is at rest for ``rest_checks_in_a_row`` consecutive checks.
+    """Step until the boxes ``body_ids`` are at rest: over the last ``rest_window_steps``, no
+    corner of any box has been farther than ``rest_corner_displacement`` from where it is now
+    (corners sampled every ``rest_check_interval_steps`` steps; corners, not centres, so that a
+    box turning about its centre is not at rest).
+
+    A displacement over a window, not a speed at an instant: a box that is slowly tipping over or
+    creeping passes a speed threshold at the moment it is checked, but not a displacement
+    test over a quarter of a second.
 
     Returns (steps taken, whether rest was reached within ``max_steps``).
     """
-    every = physics_cfg.rest_check_interval_steps
-    in_a_row, steps = 0, 0
+    every = int(physics_cfg.rest_check_interval_steps)
+    window = max(1, int(np.ceil(int(physics_cfg.rest_window_steps) / every)))  # checks
+    eps2 = float(physics_cfg.rest_corner_displacement) ** 2
+    if not body_ids:
+        return 0, True
+    half = _half_extents(client, body_ids)
+    history = [box_corners(client, body_ids, half)]
+    steps = 0
     while steps < max_steps:
         for _ in range(every):
             p.stepSimulation(physicsClientId=client)
         steps += every
-        if _is_at_rest(client, body_ids, physics_cfg.rest_linear_speed,
-                       physics_cfg.rest_angular_speed):
-            in_a_row += 1
-            if in_a_row >= physics_cfg.rest_checks_in_a_row:
-                return steps, True
-        else:
-            in_a_row = 0
+        now = box_corners(client, body_ids, half)
+        history.append(now)
+        if len(history) > window + 1:
+            history.pop(0)
+        if len(history) == window + 1 and max(
+                float(((past - now) ** 2).sum(-1).max()) for past in history[:-1]) < eps2:
+            return steps, True
     return steps, False
+
+
+def corner_drift(client: int, body_ids: list[int], steps: int) -> np.ndarray:
+    """Step the simulation ``steps`` times; return each box's largest corner displacement over
+    them, (n,) metres. The check that a heap declared at rest is at rest."""
+    half = _half_extents(client, body_ids)
+    before = box_corners(client, body_ids, half)
+    for _ in range(steps):
+        p.stepSimulation(physicsClientId=client)
+    return np.linalg.norm(box_corners(client, body_ids, half) - before, axis=-1).max(-1)
 
 
 def _inside_bin(position: np.ndarray, bin_cfg) -> bool:
@@ -160,6 +202,7 @@ def drop_heap(client: int, rng: np.random.Generator, boxes_cfg, bin_cfg, physics
                                  basePosition=[x, y, physics_cfg.drop_height_above_bin_floor],
                                  baseOrientation=q.tolist(), physicsClientId=client)
         p.changeDynamics(body, -1, lateralFriction=boxes_cfg.lateral_friction,
+                         frictionAnchor=int(bool(physics_cfg.friction_anchor)),
                          physicsClientId=client)
         bodies.append((body, k))
         if i < n - 1:

@@ -57,7 +57,9 @@ def simulate_scene(client: int, cfg, rng: np.random.Generator) -> SimulatedScene
     intr = Intrinsics.from_config(cfg.camera)
     T_world_cam = camera_pose_above_bin(cfg.camera.height_above_bin_floor)
     frame = render_depth(client, intr, T_world_cam, cfg.camera.near, cfg.camera.far,
-                         ground=(-cfg.bin.floor_thickness, cell[0]))
+                         ground=(-cfg.bin.floor_thickness, cell[0]),
+                         renderer=cfg.camera.renderer,
+                         bodies=cell[1:] + [b.body_id for b in heap.boxes])
     # body id -> instance number (1-based; 0 for everything that is not a kept box)
     lut = np.zeros(int(frame.body_ids.max(initial=-1)) + 2, dtype=np.uint8)
     for k, box in enumerate(heap.boxes, start=1):
