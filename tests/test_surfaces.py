@@ -55,7 +55,7 @@ def _render_box(client, size, position, quat, occluders=()):
     body = _add_box(client, size, position, quat)
     for occ_size, occ_position in occluders:
         _add_box(client, occ_size, occ_position)
-    frame = render_depth(client, SR300, T_WORLD_CAM, 0.1, 2.0)
+    frame = render_depth(client, SR300, T_WORLD_CAM, 0.1, 2.0, renderer="raycast")
     mask = (frame.body_ids == body).astype(np.uint8)
     T_world_box = pose_matrix(np.asarray(position, float), np.asarray(quat, float))
     box = Box(instance=1, type_index=0, type_name="flat", size=np.asarray(size, float),

@@ -71,14 +71,14 @@ def check_renderer(name: str) -> None:
 
 
 def render_depth(
-    client: int, intr: Intrinsics, T_world_cam: np.ndarray, near: float, far: float,
-    ground: tuple[float, int] | None = None, renderer: str = "tinyrenderer",
+    client: int, intr: Intrinsics, T_world_cam: np.ndarray, near: float, far: float, *,
+    renderer: str, ground: tuple[float, int] | None = None,
     bodies: Sequence[int] | None = None,
 ) -> DepthFrame:
     """Render metric depth and body ids of the current pybullet state.
 
     Args:
-        renderer: ``"tinyrenderer"`` (pybullet's software rasteriser, the reference) or
+        renderer: ``camera.renderer``: ``"tinyrenderer"`` (pybullet's software rasteriser, the reference) or
             ``"raycast"`` (``pipeline.camera.raycast``: exact ray/box intersection of the same
             world, several times faster; ``tests/test_raycast.py`` checks that both give the
             same mask and depth within 0.1 mm). (pybullet's EGL plugin gives pixel-identical
