@@ -51,7 +51,9 @@ from pipeline.artifacts.store import StageRun
 from pipeline.camera.render import check_renderer
 from pipeline.cli import CONF_DIR, data_root, stage_main
 from pipeline.executor import map_shards, resolve_workers
-from pipeline.picking.trial import OUTCOMES, TRIAL_ENDS, PickRunner, TrialResult
+from pipeline.picking.trial import (
+    OUTCOMES, RETRY_POLICIES, TRIAL_ENDS, PickRunner, TrialResult,
+)
 from pipeline.tracking import StageLog
 
 STAGE = "evaluate"
@@ -60,7 +62,8 @@ SECTIONS = ("seed", "camera", "sensor", "depth_filter", "bin", "physics", "hand"
 NOT_AFFECTING_RESULT = ("evaluate.train_version", "evaluate.baseline_version",
                         "evaluate.workers", "evaluate.force", "evaluate.log_trials",
                         "evaluate.num_threads")
-PLANNERS = ("dcnn", "dexnet")
+PLANNERS = ("dcnn", "dexnet", "oracle")
+APPROACHES = ("direct", "pregrasp", "lift")
 HEAP_SEED, PLAN_SEED, SENSOR_SEED = 31, 37, 41
 PAPER_TABLE3 = [  # paper Table 3, as reported
     {"system": "Dex-Net 3.0", "hand": "suction (1 cup)", "success": 98.0, "planning_s": 3.0,
@@ -94,8 +97,10 @@ def _init_worker(cfg_obj, train_dir: str | None, baseline_dir: str | None) -> No
     torch.set_num_threads(int(cfg_obj.evaluate.num_threads))
 
 
-def make_planner(cfg, name: str, train_dir: str | None, baseline_dir: str | None, T_home):
-    """``plan(depth_m, intrinsics, rng)`` for planner ``name``."""
+def make_planner(cfg, name: str, train_dir: str | None, baseline_dir: str | None, T_home,
+                 cell=None):
+    """``plan(depth_m, intrinsics, rng)`` for planner ``name`` (``oracle``: also ``frame=``; it
+    reads the ``cell``'s true box poses, ``pipeline.picking.oracle``)."""
     if name == "dcnn":
         from pipeline.planner.planner import Planner
 
@@ -113,7 +118,13 @@ def make_planner(cfg, name: str, train_dir: str | None, baseline_dir: str | None
         variant = str(cfg.evaluate.dexnet_variant)
         dex = DexNetPlanner.from_config(cfg, variant, T_home,
                                         baseline_dir if variant == "gqcnn" else None)
-        return lambda depth, intr, rng: dex.plan(depth, intr, rng=rng)
+        k = int(cfg.evaluate.max_candidates_checked) if bool(cfg.evaluate.check_reachability) \
+            else 1
+        return lambda depth, intr, rng: dex.plan(depth, intr, rng=rng, max_grasps=k)
+    if name == "oracle":
+        from pipeline.picking.oracle import OraclePlanner
+
+        return OraclePlanner(cfg, cell)
     raise ValueError(f"unknown planner {name!r}: choose from {PLANNERS}")
 
 
@@ -126,7 +137,7 @@ def _runner(name: str) -> PickRunner:
         cfg = _STATE["cfg"]
         cell = PickCell(cfg, lambda: Robot(robot_config(cfg)))
         T_home = cell.robot.home_camera_pose()
-        plan = make_planner(cfg, name, _STATE["train_dir"], _STATE["baseline_dir"], T_home)
+        plan = make_planner(cfg, name, _STATE["train_dir"], _STATE["baseline_dir"], T_home, cell)
         _STATE["runners"][name] = PickRunner(cfg, cell, plan, name)
     return _STATE["runners"][name]
 
@@ -257,6 +268,12 @@ def evaluate(cfg: DictConfig) -> Path:
     if int(cfg.evaluate.num_trials) < 1:
         raise ValueError(f"evaluate.num_trials must be >= 1, got {cfg.evaluate.num_trials}")
     check_renderer(str(cfg.camera.renderer))
+    if str(cfg.evaluate.retry_policy) not in RETRY_POLICIES:
+        raise ValueError(f"evaluate.retry_policy is {cfg.evaluate.retry_policy!r}: choose from "
+                         f"{RETRY_POLICIES}")
+    if str(cfg.evaluate.approach) not in APPROACHES:
+        raise ValueError(f"evaluate.approach is {cfg.evaluate.approach!r}: choose from "
+                         f"{APPROACHES}")
     upstream, train_dir, baseline_dir = {}, None, None
     if "dcnn" in planners:
         train_dir = resolve_artifact(Path(cfg.paths.models), "train", cfg.evaluate.train_version,

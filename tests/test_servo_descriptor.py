@@ -235,3 +235,79 @@ def test_failures_have_reasons():
     patch[:] = 0.0
     patch[100:103, 100:103] = 0.5
     assert describe_surface(patch, SR300, (101, 101)) == (None, "too_few_window_points")
+
+
+def _step_image():
+    """A level face at 0.5 m over u ∈ [150, 250), v ∈ [150, 250) (100 × 100 px), the floor 13 cm
+    below it (0.63 m) everywhere else; SR300-like intrinsics."""
+    from pipeline.camera.geometry import Intrinsics
+
+    intr = Intrinsics(416, 416, 411.7, 411.7, 207.5, 207.5)
+    depth = np.full((416, 416), 0.63, np.float32)
+    depth[150:250, 150:250] = 0.5
+    return depth, intr
+
+
+def test_seed_near_a_face_edge_over_a_13cm_step_keeps_its_face():
+    """Seeds 1–3 px inside the face's edge: the 21 × 21 window holds face and floor, and the
+    descriptor still returns the face: normal (0, 0, −1), region = the face's 100 × 100 px
+    (area 100² px × (0.5/411.7 m)² = 0.01475 m²), centre (199.5, 199.5)."""
+    from pipeline.servo.descriptor import DescriptorConfig, describe_surface
+
+    depth, intr = _step_image()
+    for seed in ((151, 199), (152, 199), (153, 199), (248, 200), (200, 248)):
+        feats, reason = describe_surface(depth, intr, seed, DescriptorConfig())
+        assert feats is not None, (seed, reason)
+        assert feats.normal_cam == pytest.approx([0, 0, -1], abs=1e-3)
+        assert feats.center_px == pytest.approx([199.5, 199.5], abs=0.5)
+        assert feats.area == pytest.approx(100 ** 2 * (0.5 / 411.7) ** 2, rel=0.03)
+
+
+def test_a_one_pixel_outlier_at_the_seed_keeps_the_face():
+    """The seed pixel itself 0.6 mm off the face (a one-pixel depth outlier): it passes Eqs. 12
+    and 13 (its own Eq. 14 normal is exact) while its four neighbours fail Eq. 13, so it is a
+    component of one pixel; the region is the face around it (the paper's rule alone gives
+    "region_too_small")."""
+    from pipeline.servo.descriptor import DescriptorConfig, describe_surface
+
+    depth, intr = _step_image()
+    depth[200, 200] = 0.5006
+    feats, reason = describe_surface(depth, intr, (200, 200), DescriptorConfig())
+    assert feats is not None, reason
+    assert feats.area == pytest.approx(100 ** 2 * (0.5 / 411.7) ** 2, rel=0.03)
+
+
+def test_window_tolerance_shrinks_with_depth_close_to_the_face():
+    """The camera 0.157 m from a level face (the servo's last frames); below-right of the seed a
+    steep face falls away (+2.3 mm of depth per row). The 21 × 21 window spans 8 mm on the face,
+    so with a fixed ε1 = 4 mm a steep RANSAC plane holds most window points and the region grown
+    from it is empty; with the tolerance scaled by Z / 0.6 m (1.05 mm) the level face wins:
+    normal (0, 0, −1)."""
+    from pipeline.camera.geometry import Intrinsics
+
+    intr = Intrinsics(416, 416, 411.7, 411.7, 207.5, 207.5)
+    depth = np.full((416, 416), 0.157, np.float32)
+    v, u = np.mgrid[0:416, 0:416]
+    corner = (v >= 122) & (u >= 209)
+    depth[corner] = (0.1585 + 0.0023 * (v - 122))[corner]
+    feats, reason = describe_surface(depth, intr, (208, 121), DescriptorConfig())
+    assert feats is None and reason == "region_too_small"  # the paper's fixed ε1
+    feats, reason = describe_surface(depth, intr, (208, 121),
+                                     DescriptorConfig(window_tolerance_depth=0.6))
+    assert feats is not None, reason
+    assert feats.normal_cam == pytest.approx([0, 0, -1], abs=1e-3)
+
+
+def test_a_seed_on_a_one_pixel_crack_keeps_the_face_around_it():
+    """Two boxes side by side, their tops level at 0.5 m, a one-pixel gap between them (column
+    u = 200) that sees 2 cm deeper: a seed on the gap takes the surface around it (the median of
+    its 3 × 3 neighbourhood), not the gap's plane, and grows the nearest box top: the left one,
+    u ∈ [150, 200) × v ∈ [150, 250), 50 × 100 px, centre (174.5, 199.5). (The seed's own depth
+    alone gives "no_region_at_seed".)"""
+    depth, intr = _step_image()
+    depth[150:250, 200] = 0.52
+    feats, reason = describe_surface(depth, intr, (200, 200), DescriptorConfig())
+    assert feats is not None, reason
+    assert feats.normal_cam == pytest.approx([0, 0, -1], abs=1e-3)
+    assert feats.center_px == pytest.approx([174.5, 199.5], abs=0.5)
+    assert feats.area == pytest.approx(50 * 100 * (0.5 / 411.7) ** 2, rel=0.03)

@@ -157,6 +157,8 @@ class HandConfig:
     margin: float = 0.002  # a cup disc grown by this must lie inside the visible surface
     min_area_ratio: float = 1.2  # surface area >= ratio × the active cups' area
     tie_tolerance: float = 0.001  # L/R camera heights closer than this: a tie (→ L)
+    # hand rotations about the normal tried by the robot-level checks, in order (0 = paper)
+    rotations_deg: List[float] = field(default_factory=lambda: [0.0])
 
 
 @dataclass
@@ -324,6 +326,9 @@ class MotionSchema:
     suction_on_s: float = 0.10  # vacuum build-up before lifting
     suction_off_s: float = 0.10  # release at the conveyor
     place_position: List[float] = field(default_factory=lambda: [-0.05, 0.40, 0.30])  # m, world: camera above the conveyor
+    pregrasp_standoff: float = 0.30  # m, the pre-grasp's largest distance along the normal
+    pregrasp_wall_margin: float = 0.01  # m, camera and cup lips this far inside the walls
+    pregrasp_image_fraction: float = 0.7  # lift: the centre within this share of the half-FOV
 
 
 @dataclass
@@ -331,6 +336,7 @@ class ServoSchema:
     """Surface feature descriptor (Eqs. 11-14) and 2.5D visual servoing (Eqs. 15-28)."""
 
     window: int = 21
+    window_tolerance_depth: float = 0.0  # m; > 0: window RANSAC tolerance ε1·min(1, Z/this)
     eps_distance: float = 0.004
     eps_normal: float = 0.05
     min_pixels: int = 50
@@ -349,13 +355,18 @@ class ServoSchema:
 class EvaluateConfig:
     """The closed-loop evaluation stage (``pipeline.evaluate``)."""
 
-    planners: List[str] = field(default_factory=lambda: ["dcnn", "dexnet"])
+    planners: List[str] = field(default_factory=lambda: ["dcnn", "dexnet", "oracle"])
     dexnet_variant: str = "gqcnn"  # gqcnn | planarity
     dexnet_pattern: str = "L"  # the cup that serves Dex-Net's single suction point
     dcnn_threshold: Optional[float] = None  # th of Eq. 3 for the closed loop; None: the model's
     stop_on_box_contact: bool = False  # True: touching any box but the target fails the attempt
     check_reachability: bool = True  # run-time robot-level check of the planned grasp
-    max_candidates_checked: int = 10
+    max_candidates_checked: int = 50
+    retry_policy: str = "skip_failed"  # "skip_failed" | "repeat" (the plain protocol)
+    approach: str = "lift"  # "lift" | "pregrasp" | "direct" (the paper: straight to d*)
+    retry_same_point_m: float = 0.03
+    retry_moved_m: float = 0.005
+    retry_moved_deg: float = 5.0
     ranking_policy: str = "paper"  # "paper" (Eq. 7) | "height_tiebreak" (Sec. 8.4's proposed fix)
     inclination_tie_deg: float = 10.0  # height_tiebreak: inclinations closer than this tie
     min_area_ratio: float = 0.0  # 0: off (paper); 1.2: Sec. 8.4's surface-area safety check

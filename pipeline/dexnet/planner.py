@@ -235,9 +235,11 @@ class DexNetPlanner:
         return result
 
     def plan(self, depth_m: np.ndarray, intrinsics: Intrinsics,
-             rng: np.random.Generator | None = None) -> list[SuctionGrasp]:
-        """One (H, W) depth image, metres → ``[best grasp]``, or ``[]`` when no candidate exists
-        (the reason in ``self.last_reason``).
+             rng: np.random.Generator | None = None, max_grasps: int = 1) -> list[SuctionGrasp]:
+        """One (H, W) depth image, metres → ``[best grasp, ...]``, or ``[]`` when no candidate
+        exists (the reason in ``self.last_reason``). With ``max_grasps`` > 1, after the best come
+        the other candidates of CEM's final set, best quality first, one per pixel: the
+        alternatives the closed loop falls back on when the robot cannot take the best.
 
         ``rng`` defaults to a generator seeded by (seed, number of earlier calls), so a planner
         replays the same sequence of plans. A rejected image (``ValueError``) is not counted.
@@ -247,14 +249,31 @@ class DexNetPlanner:
             rng = np.random.default_rng([self.seed, self._calls])
         self._calls += 1
         result = self._run_cem(depth_m, intrinsics, rng)
-        return grasps_of(result)
+        return grasps_of(result, max_grasps)
 
 
-def grasps_of(result: CEMResult) -> list[SuctionGrasp]:
+def _grasp(c: Candidates, i: int, score: float) -> SuctionGrasp:
+    axis = c.axis[i]
+    return SuctionGrasp(u=float(c.uv[i, 0]), v=float(c.uv[i, 1]), score=float(score),
+                        depth=float(c.depth[i]), point_cam=c.point[i].copy(), normal_cam=-axis,
+                        axis_cam=axis.copy(), angle=float(c.angle[i]))
+
+
+def grasps_of(result: CEMResult, max_grasps: int = 1) -> list[SuctionGrasp]:
+    """The best grasp, then up to ``max_grasps`` − 1 others of the final scored set (finite
+    scores, best first, ties in sampling order; one per pixel, the best's pixel excluded)."""
     if len(result.best) == 0:
         return []
-    b = result.best
-    axis = b.axis[0]
-    return [SuctionGrasp(u=float(b.uv[0, 0]), v=float(b.uv[0, 1]), score=float(result.best_score),
-                         depth=float(b.depth[0]), point_cam=b.point[0].copy(),
-                         normal_cam=-axis, axis_cam=axis.copy(), angle=float(b.angle[0]))]
+    out = [_grasp(result.best, 0, result.best_score)]
+    if max_grasps <= 1 or not result.iterations:
+        return out
+    final = result.iterations[-1]
+    seen = {(int(result.best.uv[0, 0]), int(result.best.uv[0, 1]))}
+    for i in np.argsort(-final.scores, kind="stable"):
+        if len(out) >= max_grasps or not np.isfinite(final.scores[i]):
+            break
+        key = (int(final.candidates.uv[i, 0]), int(final.candidates.uv[i, 1]))
+        if key not in seen:
+            seen.add(key)
+            out.append(_grasp(final.candidates, int(i), final.scores[i]))
+    return out

@@ -22,7 +22,7 @@ from pipeline.dataset.scenes import Scene
 from pipeline.labelling.hand import HandLabel
 from pipeline.labelling.types import Surface
 from pipeline.robot.model import Robot, RobotConfig
-from pipeline.robot.target_pose import target_camera_pose
+from pipeline.robot.target_pose import hand_rotations, rotate_about, target_camera_pose
 from pipeline.simulation.heap import build_cell
 
 
@@ -80,14 +80,21 @@ class RobotChecker:
         self._scene = scene
 
     def check(self, surface: Surface, hand: HandLabel, hand_cfg) -> str | None:
-        """None when the robot can take the grasp, else the failed check:
-        "ik", "joint_limits" or "collision"."""
-        T_cam0_target = target_camera_pose(
-            surface.center_cam, surface.normal_cam, hand.x_axis_cam, hand.grasp_class.name,
-            standoff=hand_cfg.standoff,
-            cup_offset=hand_cfg.cup_offset)
-        result = self.robot.solve_ik(self.T_world_cam @ T_cam0_target,
-                                     seed_q=self.robot.home_q(),
-                                     obstacle_ids=self.obstacles,
-                                     ignore_body_ids=[self.box_bodies[surface.instance]])
-        return result.reason
+        """None when the robot can take the grasp with one of the hand's rotations about the
+        normal (``hand.rotations_deg``, in order; 0 = the paper's axis), else the failed check
+        of the paper's rotation: "ik", "joint_limits" or "collision"."""
+        first = None
+        for rot in hand_rotations(hand.grasp_class.name, hand_cfg.rotations_deg):
+            x_axis = rotate_about(hand.x_axis_cam, surface.normal_cam, rot)
+            T_cam0_target = target_camera_pose(
+                surface.center_cam, surface.normal_cam, x_axis, hand.grasp_class.name,
+                standoff=hand_cfg.standoff,
+                cup_offset=hand_cfg.cup_offset)
+            result = self.robot.solve_ik(self.T_world_cam @ T_cam0_target,
+                                         seed_q=self.robot.home_q(),
+                                         obstacle_ids=self.obstacles,
+                                         ignore_body_ids=[self.box_bodies[surface.instance]])
+            if result.reason is None:
+                return None
+            first = first or result.reason
+        return first

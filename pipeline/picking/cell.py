@@ -30,12 +30,14 @@ _PARKED = [0.0, 0.0, -50.0]  # where the robot waits while the camera renders
 
 @dataclass
 class Frame:
-    """One camera image. ``depth_m``: (H, W) float32 metres, 0 = no data; ``body_ids``: (H, W)
-    int32 pybullet body per pixel (−1 none); ``T_world_cam``: (4, 4) camera pose."""
+    """One camera image. ``depth_m``: (H, W) float32 metres, 0 = no data, as the sensor returns
+    it and preprocessed; ``body_ids``: (H, W) int32 pybullet body per pixel (−1 none);
+    ``T_world_cam``: (4, 4) camera pose; ``depth_clean_m``: the renderer's ideal depth."""
 
     depth_m: np.ndarray
     body_ids: np.ndarray
     T_world_cam: np.ndarray
+    depth_clean_m: np.ndarray | None = None
 
 
 class PickCell:
@@ -95,7 +97,7 @@ class PickCell:
             depth = apply_sensor_model(depth, self.cfg.sensor, self.sensor_rng, self.intrinsics)
         # preprocessing before planning and servoing (pipeline.camera.depth_filter)
         depth = preprocess_depth(depth, self.cfg.depth_filter)
-        return Frame(depth, frame.body_ids, T)
+        return Frame(depth, frame.body_ids, T, frame.depth_m)
 
     def step(self, seconds: float) -> None:
         """Advance the physics by ``seconds`` (rounded to whole time steps, at least one)."""

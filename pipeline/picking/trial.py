@@ -46,6 +46,7 @@ bin; attempts until the bin is empty, the planner finds no grasp at home, one bo
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -59,6 +60,7 @@ from pipeline.picking.cell import Frame, PickCell
 OUTCOMES = ("success", "no_seal", "dropped", "collision", "joint_limits", "timeout",
             "lost_target")
 TRIAL_ENDS = ("bin_empty", "no_grasp", "max_failures", "max_attempts")
+RETRY_POLICIES = ("skip_failed", "repeat")
 
 
 @dataclass
@@ -81,6 +83,10 @@ class Attempt:
     planning_s: float = 0.0  # measured wall-clock
     final_error: list = field(default_factory=list)  # |p_e − p_e*| (3) and |uθ| (deg)
     seal_reason: str = ""
+    collided: list = field(default_factory=list)  # "robot link:bin|box" pairs of a collision
+    phase: str = ""  # where a collision happened: "servo" or "approach"
+    pregrasp_standoff: float = 0.0  # m, the pre-grasp's distance along the normal (0: none)
+    lost_reason: str = ""  # the descriptor's reason when the target was lost
 
     @property
     def sim_s(self) -> float:
@@ -116,19 +122,20 @@ def _project(T_world_cam: np.ndarray, point_world: np.ndarray, intr: Intrinsics,
     return np.array([intr.fx * c[0] / c[2] + intr.cx, intr.fy * c[1] / c[2] + intr.cy])
 
 
-@dataclass
-class _Probe:
-    u: float
-    v: float
-    point_cam: np.ndarray
-
-
 def _link_origins(robot) -> np.ndarray:
     """(L, 3) world positions of the robot's link frames (base first), for the logs."""
     states = p.getLinkStates(robot.body_id, list(range(p.getNumJoints(
         robot.body_id, physicsClientId=robot.client))), physicsClientId=robot.client)
     base = p.getBasePositionAndOrientation(robot.body_id, physicsClientId=robot.client)[0]
     return np.array([base] + [s[4] for s in states], np.float64)
+
+
+def paper_x_axis(feats) -> np.ndarray:
+    """The hand's X by the paper's rule (camera frame): the surface axis whose warped view is
+    nearer the image X, signed towards +X."""
+    axes = [(feats.long_axis_cam, feats.warped_long), (feats.short_axis_cam, feats.warped_short)]
+    axis, warped = axes[int(np.argmax([abs(w[0]) for _, w in axes]))]  # larger |cos|: nearer X
+    return np.asarray(axis if warped[0] >= 0 else -axis, np.float64)
 
 
 def move_time(dq: np.ndarray, max_speed: float, max_accel: float) -> float:
@@ -159,6 +166,8 @@ class PickRunner:
         s, m = cfg.servo, cfg.motion
         self.dt = 1.0 / float(s.control_rate_hz)
         self.descriptor_cfg = DescriptorConfig(window=int(s.window),
+                                               window_tolerance_depth=float(
+                                                   s.window_tolerance_depth),
                                                eps_distance=float(s.eps_distance),
                                                eps_normal=float(s.eps_normal),
                                                min_pixels=int(s.min_pixels),
@@ -180,25 +189,24 @@ class PickRunner:
         self.gripper_factory = lambda: SuctionGripper(cell.client, cell.robot, self.suction_cfg,
                                                       float(cfg.hand.cup_offset))
         self._place_q: np.ndarray | None = None
+        self._contacts: list[str] = []  # of the last collision check (_collides)
         # wall time of the parts of a control step (seconds, one entry per call)
         self.timings: dict[str, list[float]] = {
             "descriptor_s": [], "control_step_s": [], "render_s": [], "control_law_s": [],
             "jacobian_s": [], "physics_s": [], "collision_s": []}
 
     # ------------------------------------------------------------------ helpers
-    def _pattern(self, cand, frame: Frame | None = None, target: int = -1) -> str:
-        """S_opt of the DCNN; for a single suction point (Dex-Net), the cup to put on it."""
+    def _patterns(self, cand) -> list[str]:
+        """The patterns a candidate may be executed with, in order of preference: the DCNN's
+        S_opt; for a single suction point (Dex-Net), ``evaluate.dexnet_pattern`` then the other
+        cup."""
         cls = getattr(cand, "grasp_class", None)
         if cls is not None:
-            return cls.name
+            return [cls.name]
         preferred = str(self.cfg.evaluate.dexnet_pattern)
-        if frame is None or preferred == "B":
-            return preferred
-        other = {"L": "R", "R": "L"}[preferred]
-        for pattern in (preferred, other):
-            if self._reachable(frame, cand, pattern, target):
-                return pattern
-        return preferred
+        if preferred == "B":
+            return ["B"]
+        return [preferred, {"L": "R", "R": "L"}[preferred]]
 
     def _large_enough(self, frame: Frame, cands: list) -> list:
         """With ``evaluate.min_area_ratio`` > 0 (paper Sec. 8.4's safety constraint), the DCNN's
@@ -221,49 +229,165 @@ class PickRunner:
                 kept.append(cand)
         return kept
 
-    def _first_reachable(self, frame: Frame, cands: list):
-        """G_opt, or with ``evaluate.check_reachability`` the best-ranked of the DCNN's
-        candidates whose target pose passes the robot-level check (the first one if none)."""
-        if not bool(self.cfg.evaluate.check_reachability) or \
-                getattr(cands[0], "grasp_class", None) is None:
-            return cands[0]
+    def _target_of(self, frame: Frame, cand) -> tuple[int, np.ndarray | None]:
+        """(the box under the candidate at home, −1 for none; its point in the world frame, or
+        None when the pixel has no depth)."""
         intr = self.cell.intrinsics
-        for cand in cands[: int(self.cfg.evaluate.max_candidates_checked)]:
-            u, v = int(round(cand.u)), int(round(cand.v))
+        u, v = int(round(cand.u)), int(round(cand.v))
+        if not (0 <= v < intr.height and 0 <= u < intr.width):
+            return -1, None
+        target = int(frame.body_ids[v, u])
+        target = target if target in self.cell.boxes else -1
+        point = getattr(cand, "point_cam", None)
+        if point is None:
             z = float(frame.depth_m[v, u])
-            target = int(frame.body_ids[v, u])
-            point = np.array([(cand.u - intr.cx) / intr.fx * z, (cand.v - intr.cy) / intr.fy * z,
-                              z])
-            probe = _Probe(cand.u, cand.v, point)
-            if z > 0 and self._reachable(frame, probe, cand.grasp_class.name,
-                                         target if target in self.cell.boxes else -1):
-                return cand
-        return cands[0]
+            if z <= 0:
+                return target, None
+            point = np.array([(cand.u - intr.cx) / intr.fx * z,
+                              (cand.v - intr.cy) / intr.fy * z, z])
+        T = frame.T_world_cam
+        return target, T[:3, :3] @ np.asarray(point, np.float64) + T[:3, 3]
 
-    def _reachable(self, frame: Frame, cand, pattern: str, target: int) -> bool:
-        """The robot-level check of the labelling stage for a single-cup point: the target camera
-        pose (the cup on the point, camera X along the surface axis nearer the image X) is
-        reachable without touching the bin or another box."""
-        from pipeline.robot.target_pose import target_camera_pose
+    def select(self, frame: Frame, cands: list, failed: list[dict]):
+        """The grasp to execute: ``(candidate, pattern, hand X axis in the world or None for the
+        paper's rule)`` of the best-ranked candidate, among the
+        first ``evaluate.max_candidates_checked``, that is not a repeat of a failed attempt
+        (``_repeats_failure``) and, with ``evaluate.check_reachability``, passes the robot-level
+        check with that pattern; None when no candidate does (the trial ends with "no grasp").
+
+        A candidate the check rejects is never executed (the check: ``_reachable``)."""
+        gate = bool(self.cfg.evaluate.check_reachability)
+        for cand in cands[: int(self.cfg.evaluate.max_candidates_checked)]:
+            target, point = self._target_of(frame, cand)
+            for pattern in self._patterns(cand):
+                if self._repeats_failure(target, pattern, point, failed):
+                    continue
+                if not gate:
+                    return cand, pattern, None
+                x_world = self._reachable(frame, cand, pattern, target) if point is not None \
+                    else None
+                if x_world is not None:
+                    return cand, pattern, x_world
+        return None
+
+    def _repeats_failure(self, target: int, pattern: str, point: np.ndarray | None,
+                         failed: list[dict]) -> bool:
+        """With ``evaluate.retry_policy: skip_failed``: the same box, with the same pattern, within
+        ``retry_same_point_m`` of a failed attempt's point, while that box has moved less than
+        ``retry_moved_m`` and turned less than ``retry_moved_deg`` since the failure: the same
+        plan in the same heap, which would fail again."""
+        ev = self.cfg.evaluate
+        if str(ev.retry_policy) == "repeat" or point is None:
+            return False
+        for f in failed:
+            if f["body"] != target or f["pattern"] != pattern or \
+                    np.linalg.norm(point - f["point"]) > float(ev.retry_same_point_m):
+                continue
+            if target < 0 or target not in self.cell.boxes:
+                return True
+            pos, quat = self.cell.box_pose(target)
+            moved = np.linalg.norm(pos - f["position"])
+            turn = 2.0 * math.degrees(math.acos(min(1.0, abs(float(np.dot(quat, f["quat"]))))))
+            if moved < float(ev.retry_moved_m) and turn < float(ev.retry_moved_deg):
+                return True
+        return False
+
+    def _reachable(self, frame: Frame, cand, pattern: str, target: int) -> np.ndarray | None:
+        """The robot-level check of the labelling stage for a grasp at the candidate: the
+        descriptor finds the surface at the point (a failure is a rejection), and the target
+        camera pose (the active cup on the point, camera X along the surface axis nearer the
+        image X, turned about the normal by the first of ``hand.rotations_deg`` that works) is
+        reachable without touching the bin or another box.
+
+        Returns the hand's X axis (3,) in the world frame of the pose that passed, or None."""
+        from pipeline.robot.target_pose import hand_rotations, rotate_about, target_camera_pose
         from pipeline.servo.descriptor import describe_surface
 
         feats, _ = describe_surface(frame.depth_m, self.cell.intrinsics,
                                     np.array([cand.u, cand.v], np.float64), self.descriptor_cfg)
         if feats is None:
-            return True  # nothing to check against: keep the preferred cup
-        axes = [(feats.long_axis_cam, feats.warped_long), (feats.short_axis_cam, feats.warped_short)]
-        angles = [abs(w[0]) for _, w in axes]  # |cos| of the angle to X: larger = smaller angle
-        axis, warped = axes[int(np.argmax(angles))]
-        x_axis = axis if warped[0] >= 0 else -axis
-        T = target_camera_pose(np.asarray(cand.point_cam), feats.normal_cam, x_axis, pattern,
-                               standoff=float(self.cfg.hand.standoff),
-                               cup_offset=float(self.cfg.hand.cup_offset))
+            return None
+        intr = self.cell.intrinsics
+        point = getattr(cand, "point_cam", None)
+        if point is None:
+            u, v = int(round(cand.u)), int(round(cand.v))
+            z = float(frame.depth_m[v, u])
+            point = np.array([(cand.u - intr.cx) / intr.fx * z,
+                              (cand.v - intr.cy) / intr.fy * z, z])
+        x_axis = paper_x_axis(feats)
         robot = self.cell.robot
-        res = robot.solve_ik(frame.T_world_cam @ T, seed_q=robot.home_q(),
-                             obstacle_ids=self.cell.obstacles,
-                             ignore_body_ids=[target] if target >= 0 else [])
-        robot.set_joints(robot.home_q())
-        return bool(res.ok)
+        hand = self.cfg.hand
+        try:
+            for rot in hand_rotations(pattern, hand.rotations_deg):
+                x_rot = rotate_about(x_axis, feats.normal_cam, rot)
+                T = target_camera_pose(np.asarray(point), feats.normal_cam, x_rot, pattern,
+                                       standoff=float(hand.standoff),
+                                       cup_offset=float(hand.cup_offset))
+                res = robot.solve_ik(frame.T_world_cam @ T, seed_q=robot.home_q(),
+                                     obstacle_ids=self.cell.obstacles,
+                                     ignore_body_ids=[target] if target >= 0 else [])
+                if res.ok:
+                    return frame.T_world_cam[:3, :3] @ (T[:3, 0])
+        finally:
+            robot.set_joints(robot.home_q())
+        return None
+
+    def _pregrasp_standoff(self, centre_cam: np.ndarray, feats, ref_cam, pattern: str,
+                           T_world_cam: np.ndarray) -> float:
+        """The pre-grasp's distance from the surface along its normal: the largest of
+        ``motion.pregrasp_standoff`` (0.30 m) down to d* in 1 cm steps at which the camera and
+        both cup lips stay inside the bin walls' vertical planes (less ``pregrasp_wall_margin``),
+        so that the final descent along the normal cannot sweep a wall; d* when none does (the
+        paper's direct approach)."""
+        from pipeline.robot.target_pose import target_camera_pose
+        from pipeline.robot.urdf_builder import CUP_TIP_Z
+
+        hand, m, b = self.cfg.hand, self.cfg.motion, self.cfg.bin
+        if ref_cam is None:
+            ref_cam = paper_x_axis(feats)
+        d_star, d_max = float(hand.standoff), float(m.pregrasp_standoff)
+        hx = float(b.inner_length_x) / 2 - float(m.pregrasp_wall_margin)
+        hy = float(b.inner_width_y) / 2 - float(m.pregrasp_wall_margin)
+        off = float(hand.cup_offset)
+        points = np.array([[0, 0, 0], [0, -off, CUP_TIP_Z], [0, off, CUP_TIP_Z]], np.float64)
+        for d in np.arange(d_max, d_star, -0.01):
+            try:
+                T = T_world_cam @ target_camera_pose(centre_cam, feats.normal_cam, ref_cam,
+                                                     pattern, standoff=float(d), cup_offset=off)
+            except ValueError:
+                return d_star
+            w = points @ T[:3, :3].T + T[:3, 3]
+            if (np.abs(w[:, 0]) <= hx).all() and (np.abs(w[:, 1]) <= hy).all():
+                return float(d)
+        return d_star
+
+    def _lifted_goal(self, centre_cam: np.ndarray, feats, ref_cam, pattern: str,
+                     T_world_cam: np.ndarray):
+        """Servo goal of the "lift" approach: the grasp pose raised straight up (world z),
+        orientation unchanged; from there the 2.5D VS descends (nearly) vertically onto the grasp
+        pose, so the cups come down from above the walls. The lift is the largest of
+        ``motion.pregrasp_standoff`` − d* down to 0 (1 cm steps) at which the surface centre
+        stays in the central ``motion.pregrasp_image_fraction`` of the image (a steep face
+        slides sideways in the view as the camera rises)."""
+        from pipeline.robot.target_pose import target_camera_pose
+
+        hand = self.cfg.hand
+        if ref_cam is None:
+            ref_cam = paper_x_axis(feats)
+        T = target_camera_pose(centre_cam, feats.normal_cam, ref_cam, pattern,
+                               standoff=float(hand.standoff), cup_offset=float(hand.cup_offset))
+        R_cam_goal = T[:3, :3]  # goal camera axes in the current camera frame
+        up_cam = T_world_cam[:3, :3].T @ np.array([0.0, 0.0, 1.0])
+        intr, frac = self.cell.intrinsics, float(self.cfg.motion.pregrasp_image_fraction)
+        lim_x, lim_y = frac * intr.cx / intr.fx, frac * intr.cy / intr.fy
+        h_max = float(self.cfg.motion.pregrasp_standoff) - float(hand.standoff)
+        for h in np.arange(h_max, 0.0, -0.01):
+            point = R_cam_goal.T @ (centre_cam - (T[:3, 3] + h * up_cam))  # seen from the goal
+            if point[2] > 0 and abs(point[0] / point[2]) <= lim_x and \
+                    abs(point[1] / point[2]) <= lim_y:
+                return dataclasses.replace(self.servo_cfg,
+                                           target_point=tuple(float(x) for x in point)), float(h)
+        return self.servo_cfg, 0.0
 
     def _render(self) -> Frame:
         t0 = time.perf_counter()
@@ -297,9 +421,16 @@ class PickRunner:
     def _collides(self, q: np.ndarray, target: int) -> bool:
         ignore = [target] if target >= 0 else []
         t0 = time.perf_counter()
-        hit = bool(self.cell.robot.in_collision(None, self._stop_bodies(), ignore_body_ids=ignore))
+        contacts = self.cell.robot.in_collision(None, self._stop_bodies(), ignore_body_ids=ignore)
         self.timings["collision_s"].append(time.perf_counter() - t0)
-        return hit
+        self._contacts = self._describe(contacts)
+        return bool(contacts)
+
+    def _describe(self, contacts) -> list[str]:
+        """Contacts as "robot link:bin|box" strings (sorted, unique), for the failure records."""
+        bin_ids = set(self.cell.cell_ids)
+        return sorted({f"{c.robot_link}:{'bin' if c.other_body in bin_ids else 'box'}"
+                       for c in contacts})
 
     def _place_joints(self) -> np.ndarray:
         """Joints of the conveyor pose (camera at ``motion.place_position`` looking down)."""
@@ -322,21 +453,22 @@ class PickRunner:
         robot.set_joints(robot.home_q())
         frame = self._render()
         t0 = time.perf_counter()
-        cands = self.planner(frame.depth_m, self.cell.intrinsics, rng)
+        extra = {"frame": frame} if getattr(self.planner, "wants_frame", False) else {}
+        cands = self.planner(frame.depth_m, self.cell.intrinsics, rng, **extra)
         return frame, cands, time.perf_counter() - t0
 
     def attempt(self, frame: Frame, cand, planning_s: float, trial: int, index: int,
-                trace: list | None) -> Attempt:
+                trace: list | None, pattern: str | None = None,
+                x_world: np.ndarray | None = None) -> Attempt:
+        """One attempt at ``cand`` with ``pattern`` (default: its first in ``_patterns``);
+        ``x_world``: where the hand's X should point (world frame; None: the paper's rule)."""
         from pipeline.servo.control import servo_velocity
         from pipeline.servo.descriptor import describe_surface
 
         cfg, cell, robot = self.cfg, self.cell, self.cell.robot
         intr: Intrinsics = cell.intrinsics
-        u0, v0 = int(round(cand.u)), int(round(cand.v))
-        target = int(frame.body_ids[v0, u0]) if (0 <= v0 < intr.height and 0 <= u0 < intr.width) \
-            else -1
-        target = target if target in cell.boxes else -1
-        pattern = self._pattern(cand, frame, target)
+        target, _ = self._target_of(frame, cand)
+        pattern = pattern or self._patterns(cand)[0]
         att = Attempt(trial=trial, index=index, planner=self.name, pattern=pattern,
                       g_opt=[float(cand.u), float(cand.v)], target_body=target,
                       target_type=cell.boxes[target]["type"] if target >= 0 else "",
@@ -352,6 +484,7 @@ class PickRunner:
         limit_hits = 0
         steps_max = int(math.ceil(float(cfg.servo.timeout_s) / self.dt))
         converged = False
+        servo_cfg = self.servo_cfg  # the pre-grasp's standoff first, then d* (step 0 sets it)
         for step in range(steps_max + 1):
             t0 = time.perf_counter()
             if step > 0:
@@ -360,7 +493,7 @@ class PickRunner:
             feats, reason = describe_surface(frame.depth_m, intr, seed, self.descriptor_cfg)
             self.timings["descriptor_s"].append(time.perf_counter() - td)
             if feats is None:
-                att.outcome = "lost_target"
+                att.outcome, att.lost_reason = "lost_target", str(reason)
                 break
             T_cam_world = np.linalg.inv(frame.T_world_cam)
             if fixed_point_world is not None:
@@ -376,8 +509,18 @@ class PickRunner:
             g_world = frame.T_world_cam[:3, :3] @ np.asarray(feats.center_cam) + \
                 frame.T_world_cam[:3, 3]
             tc = time.perf_counter()
+            ref = None if x_world is None else T_cam_world[:3, :3] @ x_world
+            if step == 0 and str(cfg.evaluate.approach) == "pregrasp":
+                d_pre = self._pregrasp_standoff(np.asarray(centre), feats, ref, pattern,
+                                                frame.T_world_cam)
+                att.pregrasp_standoff = d_pre
+                servo_cfg = dataclasses.replace(self.servo_cfg, standoff=d_pre)
+            elif step == 0 and str(cfg.evaluate.approach) == "lift":
+                servo_cfg, lift = self._lifted_goal(np.asarray(centre), feats, ref, pattern,
+                                                    frame.T_world_cam)
+                att.pregrasp_standoff = float(cfg.hand.standoff) + lift
             cmd = servo_velocity(centre, feats.normal_cam, feats.warped_long, feats.warped_short,
-                                 pattern, self.servo_cfg, self.dt)
+                                 pattern, servo_cfg, self.dt, reference_x=ref)
             self.timings["control_law_s"].append(time.perf_counter() - tc)
             if trace is not None:
                 trace.append({"attempt": index, "step": step, "t": att.servo_s,
@@ -391,6 +534,11 @@ class PickRunner:
                               "surface": feats})
             att.final_error = [float(x) for x in np.abs(cmd.error[:3])] + [
                 float(np.degrees(np.linalg.norm(cmd.error[3:])))]
+            if cmd.converged and servo_cfg is not self.servo_cfg:
+                servo_cfg = self.servo_cfg  # at the pre-grasp: descend along the normal to d*
+                cmd = servo_velocity(centre, feats.normal_cam, feats.warped_long,
+                                     feats.warped_short, pattern, servo_cfg, self.dt,
+                                     reference_x=ref)
             if cmd.converged:
                 converged = True
                 break
@@ -410,7 +558,7 @@ class PickRunner:
                 att.outcome = "joint_limits"
                 break
             if self._collides(q, target):
-                att.outcome = "collision"
+                att.outcome, att.collided, att.phase = "collision", self._contacts, "servo"
                 break
         if att.outcome:
             return self._go_home(att)
@@ -431,10 +579,10 @@ class PickRunner:
         for _ in range(steps):
             q, _ = self._move_twist(q, np.array([0.0, 0.0, v, 0.0, 0.0, 0.0]))
             att.motion_s += self.dt
-        hit = [c.other_body for c in robot.in_collision(None, self._stop_bodies())
+        hit = [c for c in robot.in_collision(None, self._stop_bodies())
                if c.other_body != target and not c.robot_link.startswith("cup")]
         if hit:
-            att.outcome = "collision"
+            att.outcome, att.collided, att.phase = "collision", self._describe(hit), "approach"
             return self._go_home(att)
         gripper = self.gripper_factory()
         outcome = gripper.try_grasp(pattern, {b: d["mass"] for b, d in cell.boxes.items()})
@@ -495,6 +643,7 @@ class PickRunner:
         boxes = len(self.cell.boxes)
         attempts: list[Attempt] = []
         failures: dict[int, int] = {}
+        failed: list[dict] = []  # the failed attempts' plans (``_repeats_failure``)
         trace: list[dict] | None = [] if keep_trace else None
         end = "max_attempts"
         for index in range(int(ev.max_attempts_per_trial)):
@@ -503,13 +652,19 @@ class PickRunner:
                 break
             frame, cands, planning_s = self.plan_at_home(rng_plan)
             cands = self._large_enough(frame, cands)
-            if not cands:
+            chosen = self.select(frame, cands, failed) if cands else None
+            if chosen is None:
                 end = "no_grasp"
                 break
-            att = self.attempt(frame, self._first_reachable(frame, cands), planning_s, trial,
-                               index, trace)
+            cand, pattern, x_world = chosen
+            target, point = self._target_of(frame, cand)
+            pose = self.cell.box_pose(target) if target >= 0 else (np.zeros(3), np.zeros(4))
+            att = self.attempt(frame, cand, planning_s, trial, index, trace, pattern, x_world)
             attempts.append(att)
             if att.outcome != "success":
+                if point is not None:
+                    failed.append({"body": target, "pattern": pattern, "point": point,
+                                   "position": pose[0], "quat": pose[1]})
                 failures[att.target_body] = failures.get(att.target_body, 0) + 1
                 if failures[att.target_body] >= int(ev.max_failures_per_target):
                     end = "max_failures"

@@ -73,3 +73,25 @@ def target_camera_pose(center_cam: np.ndarray, normal_cam: np.ndarray, x_axis_ca
     T[:3, :3] = np.column_stack([x, y, z])
     T[:3, 3] = c + standoff * n - sign * cup_offset * y
     return T
+
+
+def hand_rotations(pattern, rotations_deg) -> list[float]:
+    """The hand rotations about the surface normal to try for ``pattern``, in order (degrees,
+    0 = the paper's axis choice). Both cups on (B) allows only 0 and 180: a quarter turn would
+    put the cup line across the axis the fit was checked along. One cup (L, R) allows any: the
+    active cup stays on the surface centre, only the idle cup and the hand move."""
+    name = _pattern_name(pattern)
+    out = [float(r) % 360.0 for r in rotations_deg]
+    if name == "B":
+        out = [r for r in out if r in (0.0, 180.0)]
+    return out or [0.0]
+
+
+def rotate_about(axis: np.ndarray, normal: np.ndarray, degrees: float) -> np.ndarray:
+    """``axis`` (3,) turned by ``degrees`` about the unit ``normal`` (right-handed, Rodrigues),
+    after removing its component along the normal."""
+    n = np.asarray(normal, np.float64) / np.linalg.norm(normal)
+    a = np.asarray(axis, np.float64)
+    a = a - (a @ n) * n
+    t = np.radians(degrees)
+    return np.cos(t) * a + np.sin(t) * np.cross(n, a)

@@ -92,6 +92,9 @@ class ServoConfig:
     max_angular_speed: float = 1.5  # rad/s
     gain_per_step: bool = True  # λ is the discrete gain of one period dt: λ_eff = λ/dt
     uniform_clamp: bool = True  # one scale factor for V and Ω (keeps their ratio)
+    # optional (3,) desired position of the surface centre in the camera frame at the goal (m):
+    # a goal other than Eqs. 17–18's (the closed loop's pre-grasp above the grasp pose)
+    target_point: Optional[tuple] = None
 
 
 @dataclass
@@ -153,8 +156,11 @@ def _axis_angle_to(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def target_features(pattern, cfg: ServoConfig | None = None) -> np.ndarray:
-    """``p_e*`` (3,) of Eqs. 17–18: ``[0, off/d*, log d*]``, off = −/0/+ cup_offset for L/B/R."""
+    """``p_e*`` (3,) of Eqs. 17–18: ``[0, off/d*, log d*]``, off = −/0/+ cup_offset for L/B/R;
+    or, with ``cfg.target_point``, that point's features (Eq. 16)."""
     cfg = cfg or ServoConfig()
+    if cfg.target_point is not None:
+        return current_features(cfg.target_point)
     off = _OFF_SIGN[_pattern_name(pattern)] * cfg.cup_offset
     return np.array([0.0, off / cfg.standoff, math.log(cfg.standoff)])
 
@@ -202,13 +208,38 @@ def _line_term(axis: np.ndarray) -> tuple[float, np.ndarray] | None:
     return _angle(a, _N_X), _axis_angle_to(a, _N_X)
 
 
-def _rotation_error(normal_cam, warped_long, warped_short) -> tuple[np.ndarray, Optional[str]]:
+def _signed_term(axis: np.ndarray, reference: np.ndarray) -> tuple[float, np.ndarray] | None:
+    """(angle to the reference, rotation term) of a warped axis signed to within 90° of the
+    image-plane ``reference``: the term turns the camera about Z until that signed axis is its
+    X, by the signed in-plane angle atan2((a × X)_z, a · X), which stays defined at 180°."""
+    a = np.array([axis[0], axis[1], 0.0])
+    r = np.array([reference[0], reference[1], 0.0])
+    na, nr = float(np.linalg.norm(a)), float(np.linalg.norm(r))
+    if na < 1e-9 or nr < 1e-9:
+        return None
+    a, r = a / na, r / nr
+    if a @ r < 0:
+        a = -a
+    return _angle(a, r), np.array([0.0, 0.0, math.atan2(-a[1], a[0])])
+
+
+def _rotation_error(normal_cam, warped_long, warped_short, reference_x=None
+                    ) -> tuple[np.ndarray, Optional[str]]:
     n_towards = _vec3(normal_cam, "normal_cam")
     norm = float(np.linalg.norm(n_towards))
     if norm < 1e-12:
         raise ValueError("normal_cam has zero length")
     n = -n_towards / norm  # paper's n: the direction camera Z must align with (away from camera)
     u_theta = _axis_angle_to(n, _N_Z)  # first term of Eq. 24 (unit axis × θ_{n,n_Z})
+    if reference_x is not None:  # the hand's X is given (a turned hand): the axis nearest it
+        ref = _vec3(reference_x, "reference_x")
+        long_ = _signed_term(_vec3(warped_long, "warped_long"), ref)
+        short = _signed_term(_vec3(warped_short, "warped_short"), ref)
+        if long_ is not None and (short is None or long_[0] < short[0]):
+            return u_theta + long_[1], "long"
+        if short is not None:
+            return u_theta + short[1], "short"
+        return u_theta, None
     long_ = _line_term(_vec3(warped_long, "warped_long"))
     short = _line_term(_vec3(warped_short, "warped_short"))
     if long_ is not None and (short is None or long_[0] < short[0]):
@@ -270,7 +301,8 @@ def clamp_twist(twist, cfg: ServoConfig | None = None) -> tuple[np.ndarray, floa
 
 
 def servo_velocity(center_cam, normal_cam, warped_long, warped_short, pattern,
-                   cfg: ServoConfig | None = None, dt: float | None = None) -> ServoCommand:
+                   cfg: ServoConfig | None = None, dt: float | None = None,
+                   reference_x=None) -> ServoCommand:
     """Eq. 23: the camera twist that drives ``e`` to zero, clamped to the speed limits.
 
     Args:
@@ -280,6 +312,10 @@ def servo_velocity(center_cam, normal_cam, warped_long, warped_short, pattern,
         pattern: "L", "B" or "R" (or an enum member with that name).
         cfg: the servo parameters.
         dt: the control period (s); required when ``cfg.gain_per_step`` (λ_eff = λ/dt).
+        reference_x: (3,) optional, current camera frame: where the hand's X should point (a
+            hand turned about the normal, ``hand.rotations_deg``). The warped axis nearest it,
+            signed towards it, is aligned with camera X. None: the paper's rule (the axis line
+            nearest camera X).
 
     Returns:
         :class:`ServoCommand` with the camera-frame twist ``[V; Ω]`` (6,).
@@ -294,7 +330,7 @@ def servo_velocity(center_cam, normal_cam, warped_long, warped_short, pattern,
     center = _vec3(center_cam, "center_cam")
     p_e = current_features(center)
     e_p = p_e - target_features(pattern, cfg)
-    u_theta, axis_used = _rotation_error(normal_cam, warped_long, warped_short)
+    u_theta, axis_used = _rotation_error(normal_cam, warped_long, warped_short, reference_x)
     e = np.concatenate([e_p, u_theta])
     M = interaction_matrix(p_e, center[2], cfg)
     raw = -lam * np.linalg.solve(M, e)

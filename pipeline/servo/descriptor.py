@@ -97,6 +97,8 @@ plane filling the whole image ~20 ms (Eq. 14 and the rectangle on every pixel).
 
 from __future__ import annotations
 
+import dataclasses
+
 from dataclasses import dataclass
 
 import cv2
@@ -136,6 +138,11 @@ class DescriptorConfig:
             as the paper). Needed on noisy depth (see the module docstring).
         refine: refit the plane by least squares on the whole region (``normal_cam``, centre
             and axes then use that plane; ``plane`` stays the window fit).
+        window_tolerance_depth: with ``window_hypotheses``, the RANSAC inlier tolerance of the
+            window planes is ε1 · min(1, Z_seed / this) (0 = ε1 at every depth). A window of
+            fixed pixel size shrinks on the surface as the camera approaches: at 0.16 m a
+            21 × 21 window spans 8 mm, and a plane steeper than the face can then hold most of
+            its points within ε1 = 4 mm.
     """
 
     window: int = 21
@@ -148,6 +155,7 @@ class DescriptorConfig:
     rim: int = 1
     normal_smoothing: int = 0
     refine: bool = True
+    window_tolerance_depth: float = 0.0  # m; > 0: window RANSAC tolerance ε1·min(1, Z/this)
 
 
 @dataclass
@@ -264,7 +272,8 @@ def _window_plane(win: np.ndarray, seed_point: np.ndarray,
     is reproducible) are scored by their points within ε1; among the planes that hold the seed
     point (within ε1), or among all if none does (the seed is an outlier, e.g. a depth spike),
     the one with most points is kept, and its points are fitted. Then ``cfg.window_refits``
-    least-squares refits on the points within ε1.
+    least-squares refits on the points within ε1. With ``cfg.window_tolerance_depth`` the
+    hypotheses' tolerance shrinks with the seed's depth (see ``DescriptorConfig``).
     """
     used = np.ones(len(win), dtype=bool)
     if cfg.window_hypotheses > 0:
@@ -279,9 +288,12 @@ def _window_plane(win: np.ndarray, seed_point: np.ndarray,
         if ok.any():
             n, p0 = n[ok] / length[ok, None], p0[ok]
             offset = np.einsum("ki,ki->k", n, p0)
-            inliers = np.abs(win @ n.T - offset) < cfg.eps_distance  # (N, K)
+            tol = cfg.eps_distance
+            if cfg.window_tolerance_depth > 0:
+                tol *= min(1.0, float(seed_point[2]) / cfg.window_tolerance_depth)
+            inliers = np.abs(win @ n.T - offset) < tol  # (N, K)
             counts = inliers.sum(axis=0)
-            holds_seed = np.abs(n @ seed_point - offset) < cfg.eps_distance
+            holds_seed = np.abs(n @ seed_point - offset) < tol
             if holds_seed.any():
                 counts = np.where(holds_seed, counts, -1)
             best = int(np.argmax(counts))
@@ -362,7 +374,15 @@ def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
     wv, wu = wv + v0, wu + u0
     zw = Z[wv, wu].astype(np.float64)
     win = np.stack([zw * xn[wu], zw * yn[wv], zw], axis=1)
-    seed_point = float(Z[v, u]) * np.array([xn[u], yn[v], 1.0], dtype=np.float64)
+    # The seed's depth: the median of its 3 × 3 neighbourhood when the seed pixel is more than
+    # ε1 from it (a one-pixel crack between two boxes, or a spike): the window plane must be the
+    # surface around the seed, not the crack's.
+    z_seed = float(Z[v, u])
+    around = Z[max(v - 1, 0):v + 2, max(u - 1, 0):u + 2]
+    z_around = float(np.median(around[around > 0]))
+    if abs(z_seed - z_around) > cfg.eps_distance:
+        z_seed = z_around
+    seed_point = z_seed * np.array([xn[u], yn[v], 1.0], dtype=np.float64)
     n_hat, c_hat = _window_plane(win, seed_point, cfg)
     d_hat = -c_hat  # n̂ · P + D̂ = 0 with n̂ towards the camera
 
@@ -405,12 +425,20 @@ def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
     # (4) Region growing: the connected component of the rule pixels at the seed.
     _, labels = cv2.connectedComponents(rules.view(np.uint8), connectivity=cfg.connectivity)
     label = int(labels[v - r0, u - c0]) if (r0 <= v < r1 and c0 <= u < c1) else 0
-    if label == 0:  # the seed fails the rules: the nearest rule pixel in the window
+    sizes = np.bincount(labels.ravel())
+    if label == 0 or sizes[label] < cfg.min_pixels:
+        # the seed fails the rules, or its component is no surface (a one-pixel depth outlier
+        # at the seed passes Eq. 13 itself while its four neighbours fail it): the nearest rule
+        # pixel in the window ...
         a0, a1, b0, b1 = max(v0, r0), min(v1, r1), max(u0, c0), min(u1, c1)
         wl = labels[a0 - r0:a1 - r0, b0 - c0:b1 - c0]
         lv, lu = np.nonzero(wl)
         if len(lv) == 0:
             return None, "no_region_at_seed"
+        # ... of a component of at least min_pixels when the window meets one
+        big = sizes[wl[lv, lu]] >= cfg.min_pixels
+        if big.any():
+            lv, lu = lv[big], lu[big]
         k = int(np.argmin((lv + a0 - v) ** 2 + (lu + b0 - u) ** 2))
         label = int(wl[lv[k], lu[k]])
     grown = (labels == label).view(np.uint8)

@@ -1,0 +1,85 @@
+"""The oracle planner: the labelling stage's own grasp points and classes on the home image.
+
+A stand-in for a network that predicts its training labels perfectly. At home the camera's
+frame is labelled exactly as the labelling stage labels a generated scene
+(``pipeline.label.label_scene``: surfaces by RANSAC on the ideal depth and the simulator's
+instance mask, the hand-level class, the robot-level check against the heap's true box poses),
+and the graspable points are ranked by Eq. 7 like the DCNN's candidates
+(``pipeline.planner.ranking``). Its Table 3 row is the ceiling of the cell's execution: it
+separates what perception loses from what execution loses. It knows the simulator's ground
+truth, so it never stands in for the DCNN's figures.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from pipeline.camera.geometry import Intrinsics
+from pipeline.dataset.scenes import Box, Scene
+from pipeline.labelling.types import GraspClass
+from pipeline.picking.cell import Frame, PickCell
+from pipeline.planner.decode import GraspPrediction
+from pipeline.planner.ranking import GraspCandidate, rank_grasps
+
+
+class OraclePlanner:
+    """``planner(depth_m, intrinsics, rng, frame=...)`` → ranked ``GraspCandidate`` list.
+
+    ``wants_frame``: the closed loop passes the home ``Frame`` (ideal depth, body ids, pose).
+    """
+
+    wants_frame = True
+
+    def __init__(self, cfg, cell: PickCell) -> None:
+        from pipeline.labelling.robot_check import RobotChecker
+        from pipeline.planner.planner import ranking_config
+
+        self.cfg, self.cell = cfg, cell
+        self.robot = RobotChecker(cfg)
+        self.ranking = dataclasses.replace(
+            ranking_config(cfg), threshold=0.5, policy=str(cfg.evaluate.ranking_policy),
+            inclination_tie=math.radians(float(cfg.evaluate.inclination_tie_deg)))
+
+    def scene(self, frame: Frame, intr: Intrinsics) -> Scene:
+        """The home frame as a labelled scene: ideal depth, instance mask, true box poses."""
+        bodies = [b for b in self.cell.boxes]
+        lut = {body: k for k, body in enumerate(bodies, start=1)}
+        mask = np.zeros(frame.body_ids.shape, np.uint8)
+        for body, k in lut.items():
+            mask[frame.body_ids == body] = k
+        T_cam_world = np.linalg.inv(frame.T_world_cam)
+        boxes = []
+        for body, k in lut.items():
+            from pipeline.camera.geometry import pose_matrix
+
+            pos, quat = self.cell.box_pose(body)
+            T = pose_matrix(pos, quat)
+            info = self.cell.boxes[body]
+            boxes.append(Box(instance=k, type_index=-1, type_name=info["type"],
+                             size=np.asarray(info["size"], np.float64), T_world_box=T,
+                             T_cam_box=T_cam_world @ T))
+        return Scene(depth_m=frame.depth_clean_m, depth_clean_m=frame.depth_clean_m, mask=mask,
+                     boxes=boxes, intrinsics=intr, T_world_cam=frame.T_world_cam, split="",
+                     index=0, seed=(0, 0, 0), settle_steps=0, settled=True)
+
+    def __call__(self, depth_m: np.ndarray, intrinsics: Intrinsics, rng=None,
+                 frame: Frame | None = None) -> list[GraspCandidate]:
+        if frame is None:
+            raise ValueError("the oracle planner needs the home frame (PickRunner passes it)")
+        from pipeline.label import label_scene
+
+        scene = self.scene(frame, intrinsics)
+        rows, _, _, _ = label_scene(scene, self.cfg, self.robot, self.cfg.bin)
+        preds = []
+        for uv, cls in zip(rows["uv"], rows["grasp_class"]):
+            if int(cls) == int(GraspClass.NG):
+                continue
+            probs = np.zeros(len(GraspClass), np.float32)
+            probs[int(cls)] = 1.0
+            preds.append(GraspPrediction(u=float(uv[0]), v=float(uv[1]),
+                                         grasp_class=GraspClass(int(cls)), probability=1.0,
+                                         class_probs=probs))
+        return rank_grasps(preds, frame.depth_clean_m, intrinsics, self.ranking)

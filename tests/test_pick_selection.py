@@ -1,0 +1,189 @@
+"""Choosing what the robot executes: the run-time check gates every target, retries differ.
+
+Hand-worked on one box lying flat in the middle of the bin (its top face at the image centre
+is reachable with both cups) and on the bin floor 2 cm from the +y wall (y = 0.13 m): with both
+cups on, the camera's x along the image x (world x) puts a cup 35 mm to each side in world y,
+one at y = 0.165 m, inside the wall (its inner face is at 0.15 m): a rejection.
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pybullet as p
+import pytest
+
+from pipeline.camera.geometry import project, world_to_camera
+from pipeline.labelling.types import GraspClass
+
+
+@pytest.fixture
+def runner(smoke_cfg):
+    from pipeline.labelling.robot_check import robot_config
+    from pipeline.picking.cell import PickCell
+    from pipeline.picking.trial import PickRunner
+    from pipeline.robot.model import Robot
+
+    cfg = smoke_cfg("evaluate", "evaluate.boxes_per_trial=1",
+                    "eval_boxes.types=[{name: medium, size: [0.145, 0.092, 0.052]}]")
+    cell = PickCell(cfg, lambda: Robot(robot_config(cfg)))
+    calls = []
+    r = PickRunner(cfg, cell, lambda d, i, rng: calls[-1] if calls else [], "test")
+    r.plans = calls  # what the planner returns next: append a list of candidates
+    cell.reset(np.random.default_rng(0), 1)
+    # put the box flat at the bin centre, at rest
+    (body,) = list(cell.boxes)
+    p.resetBasePositionAndOrientation(body, [0, 0, 0.026], [0, 0, 0, 1],
+                                      physicsClientId=cell.client)
+    cell.settle()
+    yield r
+    cell.close()
+
+
+def _pixel_of(runner, point_world):
+    frame = runner.cell.render()
+    u, v = project(world_to_camera(np.asarray(point_world), frame.T_world_cam),
+                   runner.cell.intrinsics)
+    return frame, float(u), float(v)
+
+
+def test_a_reachable_target_is_chosen_and_a_rejected_one_never(runner):
+    (body,) = list(runner.cell.boxes)
+    frame, u, v = _pixel_of(runner, [0, 0, 0.052])  # the box's top face centre
+    good = SimpleNamespace(u=u, v=v, grasp_class=GraspClass.B)
+    _, wu, wv = _pixel_of(runner, [0.1, 0.13, 0.0])
+    bad = SimpleNamespace(u=wu, v=wv, grasp_class=GraspClass.B)
+    assert runner._target_of(frame, good)[0] == body
+    assert runner._reachable(frame, good, "B", body) is not None
+    assert runner._reachable(frame, bad, "B", -1) is None
+    # G_opt is the rejected one: the next candidate is executed, never G_opt
+    assert runner.select(frame, [bad, good], [])[:2] == (good, "B")
+    # nothing passes: no grasp (the trial ends), G_opt is not run anyway
+    assert runner.select(frame, [bad, bad], []) is None
+    runner.plans.append([bad])
+    result = runner.run_trial(0, np.random.default_rng(0), np.random.default_rng(1))
+    assert result.end == "no_grasp" and result.attempts == []
+
+
+def test_a_retry_after_a_failure_differs(runner):
+    """A failed plan (box b, pattern B, point P) is skipped while b has not moved; a different
+    pattern, a point 5 cm away, or the box moved by 1 cm or turned by 10° make it a new plan."""
+    (body,) = list(runner.cell.boxes)
+    pos, quat = runner.cell.box_pose(body)
+    P = np.array([0.0, 0.0, 0.052])
+    failed = [{"body": body, "pattern": "B", "point": P, "position": pos, "quat": quat}]
+    assert runner._repeats_failure(body, "B", P + [0.01, 0, 0], failed)  # 1 cm: same plan
+    assert not runner._repeats_failure(body, "L", P, failed)
+    assert not runner._repeats_failure(body, "B", P + [0.05, 0, 0], failed)
+    moved = [dict(failed[0], position=pos + [0.01, 0, 0])]
+    assert not runner._repeats_failure(body, "B", P, moved)
+    half = np.radians(10) / 2
+    turned = [dict(failed[0], quat=np.array([0, 0, np.sin(half), np.cos(half)]))]
+    assert not runner._repeats_failure(body, "B", P, turned)
+    # the same candidate is skipped by select; with retry_policy=repeat it is chosen again
+    frame, u, v = _pixel_of(runner, P)
+    cand = SimpleNamespace(u=u, v=v, grasp_class=GraspClass.B)
+    assert runner.select(frame, [cand], failed) is None
+    runner.cfg.evaluate.retry_policy = "repeat"
+    assert runner.select(frame, [cand], failed)[:2] == (cand, "B")
+
+
+def test_single_point_tries_the_other_cup(runner):
+    """A Dex-Net-style point (no class) gets ``dexnet_pattern`` (L) first, then R; when L was
+    the failed plan, R is next."""
+    (body,) = list(runner.cell.boxes)
+    frame, u, v = _pixel_of(runner, [0, 0, 0.052])
+    point_cam = world_to_camera(np.array([0, 0, 0.052]), frame.T_world_cam)
+    cand = SimpleNamespace(u=u, v=v, grasp_class=None, point_cam=point_cam)
+    assert runner._patterns(cand) == ["L", "R"]
+    assert runner.select(frame, [cand], [])[:2] == (cand, "L")
+    pos, quat = runner.cell.box_pose(body)
+    failed = [{"body": body, "pattern": "L", "point": np.array([0, 0, 0.052]), "position": pos,
+               "quat": quat}]
+    assert runner.select(frame, [cand], failed)[:2] == (cand, "R")
+
+
+def test_dexnet_alternatives_follow_the_best_by_quality():
+    """``grasps_of``: the best, then the final set's others by score (ties in sampling order),
+    skipping -inf and the best's pixel and repeated pixels."""
+    from pipeline.dexnet.cem import CEMIteration, CEMResult
+    from pipeline.dexnet.planner import grasps_of
+    from pipeline.dexnet.sampling import Candidates
+
+    uv = np.array([[10, 10], [20, 20], [30, 30], [20, 20], [40, 40]])
+    n = len(uv)
+    c = Candidates(uv=uv, point=np.zeros((n, 3)), axis=np.tile([0, 0, 1.0], (n, 1)),
+                   depth=np.ones(n), angle=np.zeros(n))
+    scores = np.array([0.9, 0.5, 0.7, 0.5, -np.inf])
+    result = CEMResult(best=c.take([0]), best_score=0.9,
+                       iterations=[CEMIteration(c, scores, np.array([0]))])
+    assert [(g.u, g.v) for g in grasps_of(result)] == [(10, 10)]
+    got = [(g.u, g.v, g.score) for g in grasps_of(result, 10)]
+    assert got == [(10, 10, 0.9), (30, 30, 0.7), (20, 20, 0.5)]
+
+
+def test_hand_rotations_by_hand():
+    """B keeps only 0 and 180 (a quarter turn puts the cup line across the fitted axis); one cup
+    keeps every angle; X turned 90° about +Z is +Y, and the normal's component is removed."""
+    from pipeline.robot.target_pose import hand_rotations, rotate_about
+
+    assert hand_rotations("B", [0, 180, 90, 270]) == [0.0, 180.0]
+    assert hand_rotations("L", [0, 180, 90, -90]) == [0.0, 180.0, 90.0, 270.0]
+    assert hand_rotations("B", [90]) == [0.0]
+    assert rotate_about([1, 0, 0.3], [0, 0, 1], 90) == pytest.approx([0, 1, 0], abs=1e-12)
+    assert rotate_about([1, 0, 0], [0, 0, 1], 180) == pytest.approx([-1, 0, 0], abs=1e-12)
+
+
+def test_servo_turns_to_a_reference_axis_by_hand():
+    """A level surface straight ahead (normal −Z), its long axis along camera X. Without a
+    reference the rotation error is 0; with the hand's X wanted at −X (a half turn) the error is
+    π about Z; wanted at +Y, −π/2 about Z... i.e. atan2(−a_y, a_x) with a = +Y: −π/2."""
+    from pipeline.servo.control import ServoConfig, servo_velocity
+
+    args = ([0, 0, 0.3], [0, 0, -1], [1, 0, 0], [0, 1, 0], "B", ServoConfig(), 1 / 30)
+    assert servo_velocity(*args).error[3:] == pytest.approx([0, 0, 0], abs=1e-12)
+    half = servo_velocity(*args, reference_x=[-1, 0, 0]).error[3:]
+    assert abs(half[2]) == pytest.approx(np.pi) and half[:2] == pytest.approx([0, 0])
+    quarter = servo_velocity(*args, reference_x=[0, 1, 0]).error[3:]
+    assert quarter == pytest.approx([0, 0, -np.pi / 2])
+
+
+def _level_face(z=0.5):
+    """A level face straight ahead of the home camera: centre (0, 0, z), normal towards it."""
+    return np.array([0.0, 0.0, z]), SimpleNamespace(
+        normal_cam=np.array([0.0, 0.0, -1.0]), long_axis_cam=np.array([1.0, 0, 0]),
+        short_axis_cam=np.array([0, 1.0, 0]), warped_long=np.array([1.0, 0, 0]),
+        warped_short=np.array([0, 1.0, 0]))
+
+
+def test_lifted_goal_by_hand(runner):
+    """Home camera looking straight down at a level face 0.5 m away. The grasp pose for B is
+    0.15 m above the centre (seen at (0, 0, 0.15)); lifted by 0.30 − 0.15 = 0.15 m it sees the
+    centre at (0, 0, 0.30). For L the camera sits 35 mm to the side, so the centre is seen at
+    y = −0.035 m, at either height."""
+    T_home = runner.cell.robot.home_camera_pose()
+    centre, feats = _level_face()
+    cfg, h = runner._lifted_goal(centre, feats, None, "B", T_home)
+    assert h == pytest.approx(0.15)
+    assert cfg.target_point == pytest.approx((0.0, 0.0, 0.30), abs=1e-9)
+    cfg, h = runner._lifted_goal(centre, feats, None, "L", T_home)
+    assert cfg.target_point == pytest.approx((0.0, -0.035, 0.30), abs=1e-9)
+    assert runner._pregrasp_standoff(centre, feats, None, "B", T_home) == pytest.approx(0.30)
+
+
+def test_lift_is_cut_to_keep_a_steep_face_in_view(runner):
+    """A face tilted 60° about the camera x axis: lifting the grasp pose straight up moves the
+    centre sideways in the goal's view by about h·sin 60°, so the full 0.15 m lift would put it
+    outside the central 70 % of the image; the lift is cut until it is inside."""
+    T_home = runner.cell.robot.home_camera_pose()
+    t = np.radians(60)
+    normal = np.array([0.0, np.sin(t), -np.cos(t)])  # towards the camera (normal · centre < 0)
+    feats = SimpleNamespace(normal_cam=normal, long_axis_cam=np.array([1.0, 0, 0]),
+                            short_axis_cam=np.cross(normal, [1.0, 0, 0]),
+                            warped_long=np.array([1.0, 0, 0]), warped_short=np.array([0, 1.0, 0]))
+    cfg, h = runner._lifted_goal(np.array([0.0, 0.0, 0.5]), feats, None, "B", T_home)
+    assert 0 < h < 0.15
+    x, y, z = cfg.target_point
+    intr = runner.cell.intrinsics
+    assert abs(y / z) <= 0.7 * intr.cy / intr.fy and abs(x / z) <= 0.7 * intr.cx / intr.fx
