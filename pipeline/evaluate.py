@@ -259,21 +259,22 @@ def _log_trials(log: StageLog, results: list[TrialResult], intr) -> None:
 
 
 # ------------------------------------------------------------------------------ the stage
+def _check_choice(what: str, value: str, choices: tuple[str, ...]) -> None:
+    """A ValueError "<what> 'value': choose from (...)" unless ``value`` is one of ``choices``."""
+    if value not in choices:
+        raise ValueError(f"{what} {value!r}: choose from {choices}")
+
+
 def evaluate(cfg: DictConfig) -> Path:
     """Run the closed-loop trials; returns the evaluation artifact folder."""
     planners = [str(p) for p in cfg.evaluate.planners]
     for name in planners:
-        if name not in PLANNERS:
-            raise ValueError(f"evaluate.planners has {name!r}: choose from {PLANNERS}")
+        _check_choice("evaluate.planners has", name, PLANNERS)
     if int(cfg.evaluate.num_trials) < 1:
         raise ValueError(f"evaluate.num_trials must be >= 1, got {cfg.evaluate.num_trials}")
     check_renderer(str(cfg.camera.renderer))
-    if str(cfg.evaluate.retry_policy) not in RETRY_POLICIES:
-        raise ValueError(f"evaluate.retry_policy is {cfg.evaluate.retry_policy!r}: choose from "
-                         f"{RETRY_POLICIES}")
-    if str(cfg.evaluate.approach) not in APPROACHES:
-        raise ValueError(f"evaluate.approach is {cfg.evaluate.approach!r}: choose from "
-                         f"{APPROACHES}")
+    _check_choice("evaluate.retry_policy is", str(cfg.evaluate.retry_policy), RETRY_POLICIES)
+    _check_choice("evaluate.approach is", str(cfg.evaluate.approach), APPROACHES)
     upstream, train_dir, baseline_dir = {}, None, None
     if "dcnn" in planners:
         train_dir = resolve_artifact(Path(cfg.paths.models), "train", cfg.evaluate.train_version,

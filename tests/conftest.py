@@ -4,9 +4,32 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pybullet as p
 import pytest
 
 from pipeline.cli import compose
+
+
+@pytest.fixture
+def client():
+    """A headless pybullet client of its own, disconnected after the test."""
+    c = p.connect(p.DIRECT)
+    yield c
+    p.disconnect(c)
+
+
+@pytest.fixture
+def static_box():
+    """A factory: ``static_box(client, half_extents, position, quat=(0, 0, 0, 1))`` → the body id
+    of a visible static box (metres, world frame)."""
+
+    def make(client, half, position, quat=(0, 0, 0, 1)):
+        col = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client)
+        vis = p.createVisualShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client)
+        return p.createMultiBody(0, col, vis, basePosition=position, baseOrientation=quat,
+                                 physicsClientId=client)
+
+    return make
 
 
 @pytest.fixture

@@ -21,18 +21,7 @@ BIN = NS(inner_length_x=0.40, inner_width_y=0.30, wall_height=0.15, wall_thickne
 PHYS = NS(gravity=-9.81, time_step=1 / 240, solver_iterations=50, friction_anchor=True)
 
 
-@pytest.fixture
-def client():
-    c = p.connect(p.DIRECT)
-    yield c
-    p.disconnect(c)
 
-
-def _static_box(client, half, position, quat=(0, 0, 0, 1)):
-    col = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client)
-    vis = p.createVisualShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client)
-    return p.createMultiBody(0, col, vis, basePosition=position, baseOrientation=quat,
-                             physicsClientId=client)
 
 
 def test_project_backproject_by_hand():
@@ -77,11 +66,11 @@ def test_floor_and_ground_depth(client, renderer):
 
 
 @pytest.mark.parametrize("renderer", RENDERERS)
-def test_box_top_height_and_corner_pixel(client, renderer):
+def test_box_top_height_and_corner_pixel(client, renderer, static_box):
     """A 0.12 × 0.075 × 0.023 m box lying flat on the floor at (0.03, −0.02)."""
     build_cell(client, BIN, PHYS)
     half = [0.06, 0.0375, 0.0115]
-    box = _static_box(client, half, [0.03, -0.02, 0.0115])
+    box = static_box(client, half, [0.03, -0.02, 0.0115])
     T = camera_pose_above_bin(CAM_HEIGHT)
     frame = render_depth(client, SR300, T, 0.1, 2.0, renderer=renderer)
     mask = frame.body_ids == box
@@ -103,7 +92,7 @@ def test_box_top_height_and_corner_pixel(client, renderer):
 
 @pytest.mark.parametrize("renderer", RENDERERS)
 @pytest.mark.parametrize("axis", ["x", "y"])
-def test_raster_samples_pixel_centres(client, axis, renderer):
+def test_raster_samples_pixel_centres(client, axis, renderer, static_box):
     """Render a plane tilted 25° and solve, per pixel, which ray the renderer sampled.
 
     For a plane n·X = d in the camera frame, the depth z at normalised image coordinates
@@ -114,7 +103,7 @@ def test_raster_samples_pixel_centres(client, axis, renderer):
     angle = np.deg2rad(25)
     quat = p.getQuaternionFromEuler([angle, 0, 0] if axis == "x" else [0, angle, 0])
     centre = np.array([0.0, 0.0, 0.1])
-    _static_box(client, [0.5, 0.5, 0.01], centre.tolist(), quat)
+    static_box(client, [0.5, 0.5, 0.01], centre.tolist(), quat)
     frame = render_depth(client, SR300, T, 0.1, 2.0, renderer=renderer)
     R = pose_matrix(centre, np.asarray(quat))[:3, :3]
     n_cam = np.linalg.inv(T)[:3, :3] @ R[:, 2]

@@ -35,28 +35,17 @@ EDGE_TIE_PX = 1e-3
 DEPTH_TOL_M = 1e-4  # the issue's 0.1 mm
 
 
-@pytest.fixture
-def client():
-    c = p.connect(p.DIRECT)
-    yield c
-    p.disconnect(c)
 
-
-def _box(client, half, position, quat=(0, 0, 0, 1)):
-    col = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client)
-    vis = p.createVisualShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client)
-    return p.createMultiBody(0, col, vis, basePosition=position, baseOrientation=quat,
-                             physicsClientId=client)
 
 
 # ------------------------------------------------------------------------ hand-worked cases
-def test_near_plane_clips_pixel_by_pixel(client):
+def test_near_plane_clips_pixel_by_pixel(client, static_box):
     """Camera 0.3 m above a floor slab (top at z = 0) and a 0.1 m cube spanning z ∈ [0.15, 0.25]:
     the cube's top is 0.05 m from the camera, nearer than the 0.1 m near plane, so the central
     ray enters the cube before the near plane and sees its bottom face from inside, at depth
     0.3 − 0.15 = 0.15 m. Rays past the cube see the floor at 0.3 m."""
-    floor = _box(client, [0.5, 0.5, 0.01], [0, 0, -0.01])
-    cube = _box(client, [0.05, 0.05, 0.05], [0, 0, 0.2])
+    floor = static_box(client, [0.5, 0.5, 0.01], [0, 0, -0.01])
+    cube = static_box(client, [0.05, 0.05, 0.05], [0, 0, 0.2])
     frame = render_depth(client, SR300, camera_pose_above_bin(0.3), 0.1, 2.0,
                          renderer="raycast")
     assert frame.body_ids[208, 208] == cube
@@ -71,10 +60,10 @@ def test_near_plane_clips_pixel_by_pixel(client):
     assert frame.depth_m[208, 414] == pytest.approx(0.3, abs=1e-6)
 
 
-def test_far_limit_and_nothing_seen(client):
+def test_far_limit_and_nothing_seen(client, static_box):
     """A floor 2.5 m away lies beyond far = 2 m: no body, depth = far; the analytic ground
     (z = −2.5) is not filled beyond far either, but a ground at z = −1.5 is."""
-    _box(client, [5, 5, 0.01], [0, 0, -2.51])
+    static_box(client, [5, 5, 0.01], [0, 0, -2.51])
     T = camera_pose_above_bin(0.0)
     frame = render_depth(client, SR300, T, 0.1, 2.0, renderer="raycast", ground=(-2.5, 7))
     assert (frame.body_ids == -1).all() and (frame.depth_m == 2.0).all()
@@ -83,7 +72,7 @@ def test_far_limit_and_nothing_seen(client):
     assert frame.depth_m[208, 208] == pytest.approx(1.5, abs=1e-6)
 
 
-def test_tilted_box_depth_by_hand(client):
+def test_tilted_box_depth_by_hand(client, static_box):
     """A box turned 30° about world x, its top face centre 0.5 m below the camera: along the
     optical axis the top face is met at z = 0.5 m exactly. One pixel row down the ray is
     z·(0, yn, 1), yn = 1/411.7, i.e. the world point (0, −yn·z, 0.6 − z); on the plane
@@ -94,7 +83,7 @@ def test_tilted_box_depth_by_hand(client):
     half = np.array([0.1, 0.1, 0.02])
     normal = np.array([0, -np.sin(angle), np.cos(angle)])  # the box's z axis in the world
     top_centre = np.array([0.0, 0.0, 0.1])
-    box = _box(client, half.tolist(), (top_centre - half[2] * normal).tolist(), q)
+    box = static_box(client, half.tolist(), (top_centre - half[2] * normal).tolist(), q)
     T = camera_pose_above_bin(0.6)
     intr = Intrinsics(416, 416, 411.7, 411.7, 208.0, 208.0)  # pixel (208, 208) on the axis
     frame = render_depth(client, intr, T, 0.1, 2.0, renderer="raycast")
@@ -105,10 +94,10 @@ def test_tilted_box_depth_by_hand(client):
     assert frame.depth_m[209, 208] == pytest.approx(z, abs=1e-6)
 
 
-def test_only_boxes_are_drawn(client):
+def test_only_boxes_are_drawn(client, static_box):
     """A visible sphere cannot be ray-cast: a clear error naming the fix; leaving it out of
     ``bodies`` draws the rest."""
-    box = _box(client, [0.05, 0.05, 0.05], [0, 0, 0.05])
+    box = static_box(client, [0.05, 0.05, 0.05], [0, 0, 0.05])
     col = p.createCollisionShape(p.GEOM_SPHERE, radius=0.05, physicsClientId=client)
     vis = p.createVisualShape(p.GEOM_SPHERE, radius=0.05, physicsClientId=client)
     ball = p.createMultiBody(0, col, vis, basePosition=[0.2, 0, 0.05], physicsClientId=client)
@@ -120,20 +109,20 @@ def test_only_boxes_are_drawn(client):
     assert ball not in frame.body_ids
 
 
-def test_transparent_shapes_are_skipped_and_unknown_renderer_refused(client):
-    body = _box(client, [0.5, 0.5, 0.01], [0, 0, 0])
+def test_transparent_shapes_are_skipped_and_unknown_renderer_refused(client, static_box):
+    body = static_box(client, [0.5, 0.5, 0.01], [0, 0, 0])
     p.changeVisualShape(body, -1, rgbaColor=[1, 1, 1, 0], physicsClientId=client)
     assert boxes_from_pybullet(client) == []
     with pytest.raises(ValueError, match="camera.renderer must be one of"):
         render_depth(client, SR300, camera_pose_above_bin(0.6), 0.1, 2.0, renderer="embree")
 
 
-def test_box_reaching_behind_the_camera(client):
+def test_box_reaching_behind_the_camera(client, static_box):
     """A wall x ∈ [0.05, 1.05], y ∈ [−1, 1], z ∈ [−1, 0.5] beside a camera at (0, 0, 0.12)
     looking down: some corners are behind the camera (their projection is unbounded), so every
     pixel is tested. Pixel u = 407 (xn = 199.5/411.7) meets the wall's face x = 0.05 at
     z = 0.05/xn = 0.10318 m, beyond the near plane; pixel u = 207 (xn < 0) never meets it."""
-    wall = _box(client, [0.5, 1.0, 0.75], [0.55, 0, -0.25])
+    wall = static_box(client, [0.5, 1.0, 0.75], [0.55, 0, -0.25])
     frame = render_depth(client, SR300, camera_pose_above_bin(0.12), 0.1, 2.0,
                          renderer="raycast")
     assert frame.body_ids[208, 407] == wall
@@ -294,11 +283,11 @@ def test_closed_loop_frames_match_tinyrenderer():
     assert totals["edge_tie"] + totals["crack"] <= totals["pixels"] * 1e-4
 
 
-def test_box_shapes_read_from_pybullet(client):
+def test_box_shapes_read_from_pybullet(client, static_box):
     """``boxes_from_pybullet`` reads half extents and the pose: a 0.12 × 0.075 × 0.023 m box at
     (0.1, −0.05, 0.2) turned 90° about z."""
     q = p.getQuaternionFromEuler([0, 0, np.pi / 2])
-    body = _box(client, [0.06, 0.0375, 0.0115], [0.1, -0.05, 0.2], q)
+    body = static_box(client, [0.06, 0.0375, 0.0115], [0.1, -0.05, 0.2], q)
     (shape,) = boxes_from_pybullet(client)
     assert shape.body_id == body
     assert shape.half_extents == pytest.approx([0.06, 0.0375, 0.0115])

@@ -90,16 +90,21 @@ def world_to_camera(points_world: np.ndarray, T_world_cam: np.ndarray) -> np.nda
     return p @ T_cam_world[:3, :3].T + T_cam_world[:3, 3]
 
 
+def rotation_matrices(quats_xyzw: np.ndarray) -> np.ndarray:
+    """(..., 4) unit quaternions (x, y, z, w) → (..., 3, 3) rotation matrices, float64."""
+    q = np.asarray(quats_xyzw, dtype=np.float64)
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+    ], -2)
+
+
 def pose_matrix(position: np.ndarray, quat_xyzw: np.ndarray) -> np.ndarray:
     """4 × 4 pose from a position (3,) and a unit quaternion (x, y, z, w)."""
-    x, y, z, w = np.asarray(quat_xyzw, dtype=np.float64)
-    R = np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
     T = np.eye(4)
-    T[:3, :3] = R
+    T[:3, :3] = rotation_matrices(quat_xyzw)
     T[:3, 3] = position
     return T
 

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 import pybullet as p
 
-from pipeline.camera.geometry import Intrinsics
+from pipeline.camera.geometry import Intrinsics, pose_matrix
 
 
 @dataclass(frozen=True)
@@ -45,13 +45,6 @@ class BoxShape:
 
 class UnsupportedGeometry(ValueError):
     """A visible shape that is not a box: the ray-cast renderer cannot draw it."""
-
-
-def _pose(position, quat_xyzw) -> np.ndarray:
-    T = np.eye(4)
-    T[:3, :3] = np.asarray(p.getMatrixFromQuaternion(quat_xyzw), np.float64).reshape(3, 3)
-    T[:3, 3] = position
-    return T
 
 
 def boxes_from_pybullet(client: int, body_ids=None) -> list[BoxShape]:
@@ -84,8 +77,8 @@ def boxes_from_pybullet(client: int, body_ids=None) -> list[BoxShape]:
                     f"pybullet geometry type {geom}: the ray-cast renderer draws base boxes "
                     "only. Leave that body out of `bodies`, or use camera.renderer=tinyrenderer")
             if T_body is None:
-                T_body = _pose(pos, quat)
-            T = T_body @ _pose(local_pos, local_orn)
+                T_body = pose_matrix(pos, quat)
+            T = T_body @ pose_matrix(local_pos, local_orn)
             out.append(BoxShape(int(body), T, np.asarray(dims, np.float64) / 2.0))
     return out
 

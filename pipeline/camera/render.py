@@ -78,8 +78,8 @@ def render_depth(
     """Render metric depth and body ids of the current pybullet state.
 
     Args:
-        renderer: ``camera.renderer``: ``"tinyrenderer"`` (pybullet's software rasteriser, the reference) or
-            ``"raycast"`` (``pipeline.camera.raycast``: exact ray/box intersection of the same
+        renderer: ``camera.renderer``: ``"tinyrenderer"`` (pybullet's software rasteriser, the
+            reference) or ``"raycast"`` (``pipeline.camera.raycast``: exact ray/box intersection of the same
             world, several times faster; ``tests/test_raycast.py`` checks that both give the
             same mask and depth within 0.1 mm). (pybullet's EGL plugin gives pixel-identical
             images to TinyRenderer but was no faster on a 2-core CPU with Mesa llvmpipe.)

@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from pipeline.camera.geometry import Intrinsics
+from pipeline.camera.geometry import Intrinsics, pose_matrix
 from pipeline.dataset.scenes import Box, Scene
 from pipeline.labelling.types import GraspClass
 from pipeline.picking.cell import Frame, PickCell
@@ -45,19 +45,12 @@ class OraclePlanner:
 
     def scene(self, frame: Frame, intr: Intrinsics) -> Scene:
         """The home frame as a labelled scene: ideal depth, instance mask, true box poses."""
-        bodies = [b for b in self.cell.boxes]
-        lut = {body: k for k, body in enumerate(bodies, start=1)}
         mask = np.zeros(frame.body_ids.shape, np.uint8)
-        for body, k in lut.items():
-            mask[frame.body_ids == body] = k
         T_cam_world = np.linalg.inv(frame.T_world_cam)
         boxes = []
-        for body, k in lut.items():
-            from pipeline.camera.geometry import pose_matrix
-
-            pos, quat = self.cell.box_pose(body)
-            T = pose_matrix(pos, quat)
-            info = self.cell.boxes[body]
+        for k, (body, info) in enumerate(self.cell.boxes.items(), start=1):
+            mask[frame.body_ids == body] = k
+            T = pose_matrix(*self.cell.box_pose(body))
             boxes.append(Box(instance=k, type_index=-1, type_name=info["type"],
                              size=np.asarray(info["size"], np.float64), T_world_box=T,
                              T_cam_box=T_cam_world @ T))

@@ -189,7 +189,6 @@ class PickRunner:
         self.gripper_factory = lambda: SuctionGripper(cell.client, cell.robot, self.suction_cfg,
                                                       float(cfg.hand.cup_offset))
         self._place_q: np.ndarray | None = None
-        self._contacts: list[str] = []  # of the last collision check (_collides)
         # wall time of the parts of a control step (seconds, one entry per call)
         self.timings: dict[str, list[float]] = {
             "descriptor_s": [], "control_step_s": [], "render_s": [], "control_law_s": [],
@@ -229,6 +228,22 @@ class PickRunner:
                 kept.append(cand)
         return kept
 
+    def _point_cam(self, frame: Frame, cand) -> np.ndarray | None:
+        """The candidate's point in the frame's camera (its own ``point_cam`` when it has one,
+        else the depth at its pixel back-projected), metres; None when the pixel has no depth
+        or lies outside the image."""
+        point = getattr(cand, "point_cam", None)
+        if point is not None:
+            return np.asarray(point, np.float64)
+        intr = self.cell.intrinsics
+        u, v = int(round(cand.u)), int(round(cand.v))
+        if not (0 <= v < intr.height and 0 <= u < intr.width):
+            return None
+        z = float(frame.depth_m[v, u])
+        if z <= 0:
+            return None
+        return np.array([(cand.u - intr.cx) / intr.fx * z, (cand.v - intr.cy) / intr.fy * z, z])
+
     def _target_of(self, frame: Frame, cand) -> tuple[int, np.ndarray | None]:
         """(the box under the candidate at home, −1 for none; its point in the world frame, or
         None when the pixel has no depth)."""
@@ -238,15 +253,11 @@ class PickRunner:
             return -1, None
         target = int(frame.body_ids[v, u])
         target = target if target in self.cell.boxes else -1
-        point = getattr(cand, "point_cam", None)
+        point = self._point_cam(frame, cand)
         if point is None:
-            z = float(frame.depth_m[v, u])
-            if z <= 0:
-                return target, None
-            point = np.array([(cand.u - intr.cx) / intr.fx * z,
-                              (cand.v - intr.cy) / intr.fy * z, z])
+            return target, None
         T = frame.T_world_cam
-        return target, T[:3, :3] @ np.asarray(point, np.float64) + T[:3, 3]
+        return target, T[:3, :3] @ point + T[:3, 3]
 
     def select(self, frame: Frame, cands: list, failed: list[dict]):
         """The grasp to execute: ``(candidate, pattern, hand X axis in the world or None for the
@@ -264,8 +275,7 @@ class PickRunner:
                     continue
                 if not gate:
                     return cand, pattern, None
-                x_world = self._reachable(frame, cand, pattern, target) if point is not None \
-                    else None
+                x_world = self._reachable(frame, cand, pattern, target)
                 if x_world is not None:
                     return cand, pattern, x_world
         return None
@@ -305,22 +315,16 @@ class PickRunner:
 
         feats, _ = describe_surface(frame.depth_m, self.cell.intrinsics,
                                     np.array([cand.u, cand.v], np.float64), self.descriptor_cfg)
-        if feats is None:
+        point = self._point_cam(frame, cand)
+        if feats is None or point is None:
             return None
-        intr = self.cell.intrinsics
-        point = getattr(cand, "point_cam", None)
-        if point is None:
-            u, v = int(round(cand.u)), int(round(cand.v))
-            z = float(frame.depth_m[v, u])
-            point = np.array([(cand.u - intr.cx) / intr.fx * z,
-                              (cand.v - intr.cy) / intr.fy * z, z])
         x_axis = paper_x_axis(feats)
         robot = self.cell.robot
         hand = self.cfg.hand
         try:
             for rot in hand_rotations(pattern, hand.rotations_deg):
                 x_rot = rotate_about(x_axis, feats.normal_cam, rot)
-                T = target_camera_pose(np.asarray(point), feats.normal_cam, x_rot, pattern,
+                T = target_camera_pose(point, feats.normal_cam, x_rot, pattern,
                                        standoff=float(hand.standoff),
                                        cup_offset=float(hand.cup_offset))
                 res = robot.solve_ik(frame.T_world_cam @ T, seed_q=robot.home_q(),
@@ -418,13 +422,13 @@ class PickRunner:
             return self.cell.obstacles
         return list(self.cell.cell_ids[1:])
 
-    def _collides(self, q: np.ndarray, target: int) -> bool:
+    def _collisions(self, target: int) -> list[str]:
+        """What the robot touches now among ``_stop_bodies`` (``_describe``d; empty: nothing)."""
         ignore = [target] if target >= 0 else []
         t0 = time.perf_counter()
         contacts = self.cell.robot.in_collision(None, self._stop_bodies(), ignore_body_ids=ignore)
         self.timings["collision_s"].append(time.perf_counter() - t0)
-        self._contacts = self._describe(contacts)
-        return bool(contacts)
+        return self._describe(contacts)
 
     def _describe(self, contacts) -> list[str]:
         """Contacts as "robot link:bin|box" strings (sorted, unique), for the failure records."""
@@ -484,7 +488,7 @@ class PickRunner:
         limit_hits = 0
         steps_max = int(math.ceil(float(cfg.servo.timeout_s) / self.dt))
         converged = False
-        servo_cfg = self.servo_cfg  # the pre-grasp's standoff first, then d* (step 0 sets it)
+        servo_cfg = self.servo_cfg  # the approach's first goal, then d* (step 0 sets it)
         for step in range(steps_max + 1):
             t0 = time.perf_counter()
             if step > 0:
@@ -535,7 +539,7 @@ class PickRunner:
             att.final_error = [float(x) for x in np.abs(cmd.error[:3])] + [
                 float(np.degrees(np.linalg.norm(cmd.error[3:])))]
             if cmd.converged and servo_cfg is not self.servo_cfg:
-                servo_cfg = self.servo_cfg  # at the pre-grasp: descend along the normal to d*
+                servo_cfg = self.servo_cfg  # at the first goal (lift, pre-grasp): on to d*
                 cmd = servo_velocity(centre, feats.normal_cam, feats.warped_long,
                                      feats.warped_short, pattern, servo_cfg, self.dt,
                                      reference_x=ref)
@@ -557,8 +561,9 @@ class PickRunner:
             if limit_hits >= 10:
                 att.outcome = "joint_limits"
                 break
-            if self._collides(q, target):
-                att.outcome, att.collided, att.phase = "collision", self._contacts, "servo"
+            contacts = self._collisions(target)
+            if contacts:
+                att.outcome, att.collided, att.phase = "collision", contacts, "servo"
                 break
         if att.outcome:
             return self._go_home(att)

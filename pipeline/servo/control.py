@@ -67,6 +67,7 @@ Choices (documented here because the paper leaves them open):
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import Optional
@@ -231,17 +232,13 @@ def _rotation_error(normal_cam, warped_long, warped_short, reference_x=None
         raise ValueError("normal_cam has zero length")
     n = -n_towards / norm  # paper's n: the direction camera Z must align with (away from camera)
     u_theta = _axis_angle_to(n, _N_Z)  # first term of Eq. 24 (unit axis × θ_{n,n_Z})
-    if reference_x is not None:  # the hand's X is given (a turned hand): the axis nearest it
+    if reference_x is None:  # the paper: the axis line nearest camera X
+        term = _line_term
+    else:  # the hand's X is given (a turned hand): the axis nearest it, signed towards it
         ref = _vec3(reference_x, "reference_x")
-        long_ = _signed_term(_vec3(warped_long, "warped_long"), ref)
-        short = _signed_term(_vec3(warped_short, "warped_short"), ref)
-        if long_ is not None and (short is None or long_[0] < short[0]):
-            return u_theta + long_[1], "long"
-        if short is not None:
-            return u_theta + short[1], "short"
-        return u_theta, None
-    long_ = _line_term(_vec3(warped_long, "warped_long"))
-    short = _line_term(_vec3(warped_short, "warped_short"))
+        term = functools.partial(_signed_term, reference=ref)
+    long_ = term(_vec3(warped_long, "warped_long"))
+    short = term(_vec3(warped_short, "warped_short"))
     if long_ is not None and (short is None or long_[0] < short[0]):
         return u_theta + long_[1], "long"
     if short is not None:

@@ -97,7 +97,6 @@ plane filling the whole image ~20 ms (Eq. 14 and the rectangle on every pixel).
 
 from __future__ import annotations
 
-import dataclasses
 
 from dataclasses import dataclass
 

@@ -12,6 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 import pybullet as p
 
+from pipeline.camera.geometry import rotation_matrices
+
 
 @dataclass
 class BoxPose:
@@ -107,12 +109,7 @@ def box_corners(client: int, body_ids: list[int], half_extents: np.ndarray) -> n
     """
     states = [p.getBasePositionAndOrientation(b, physicsClientId=client) for b in body_ids]
     pos = np.array([s[0] for s in states], np.float64).reshape(-1, 3)
-    x, y, z, w = np.array([s[1] for s in states], np.float64).reshape(-1, 4).T
-    R = np.stack([  # rotation matrices of the quaternions (x, y, z, w), (n, 3, 3)
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
-        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
-        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
-    ], -2)
+    R = rotation_matrices(np.array([s[1] for s in states], np.float64).reshape(-1, 4))
     local = _UNIT_CORNERS[None] * np.asarray(half_extents, np.float64)[:, None, :]  # (n, 8, 3)
     return np.einsum("nij,nkj->nki", R, local) + pos[:, None, :]
 
