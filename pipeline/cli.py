@@ -65,6 +65,29 @@ def import_with_fix(name: str) -> ModuleType:
             name=name) from e
 
 
+def own_overrides(exclude_prefix: str) -> list[str]:
+    """This command's own Hydra overrides, minus those of ``<exclude_prefix>.*`` (a study stage
+    passes the rest on to every stage it runs); none outside ``@hydra.main``."""
+    try:
+        from hydra.core.hydra_config import HydraConfig
+
+        task = list(HydraConfig.get().overrides.task)
+    except ValueError:  # not under @hydra.main (tests, notebooks)
+        return []
+    return [o for o in task if not o.lstrip("+~").startswith(exclude_prefix + ".")]
+
+
+def scale_overrides(cfg: DictConfig, overrides: list[str] | None) -> list[str]:
+    """``overrides`` with this config's ``experiment`` and ``paths.root`` added where they are
+    not given: what a study stage passes to the stages it runs."""
+    base = list(overrides or [])
+    if not any(o.startswith("experiment=") for o in base):
+        base.insert(0, f"experiment={cfg.experiment}")
+    if not any(o.startswith("paths.root=") for o in base):
+        base.append(f"paths.root={cfg.paths.root}")
+    return base
+
+
 def stage_main(stage_fn: Callable[[DictConfig], object]) -> Callable[[DictConfig], None]:
     """Wrap a stage function for ``@hydra.main``: known errors print one clear line, exit 2.
 

@@ -34,7 +34,6 @@ into the manifest's ``timings``, not into the files.
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import json
 import math
@@ -47,6 +46,7 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from pipeline.artifacts import compute_version, resolve_artifact, run_stage, stage_config
+from pipeline.artifacts.csvfile import write_rows
 from pipeline.artifacts.store import StageRun
 from pipeline.camera.render import check_renderer
 from pipeline.cli import CONF_DIR, data_root, stage_main
@@ -54,6 +54,7 @@ from pipeline.executor import map_shards, resolve_workers
 from pipeline.picking.trial import (
     OUTCOMES, RETRY_POLICIES, TRIAL_ENDS, PickRunner, TrialResult,
 )
+from pipeline.robot.approach import check_approach
 from pipeline.tracking import StageLog
 
 STAGE = "evaluate"
@@ -63,7 +64,6 @@ NOT_AFFECTING_RESULT = ("evaluate.train_version", "evaluate.baseline_version",
                         "evaluate.workers", "evaluate.force", "evaluate.log_trials",
                         "evaluate.num_threads")
 PLANNERS = ("dcnn", "dexnet", "oracle")
-APPROACHES = ("direct", "pregrasp", "lift")
 HEAP_SEED, PLAN_SEED, SENSOR_SEED = 31, 37, 41
 PAPER_TABLE3 = [  # paper Table 3, as reported
     {"system": "Dex-Net 3.0", "hand": "suction (1 cup)", "success": 98.0, "planning_s": 3.0,
@@ -175,22 +175,18 @@ def summarise(results: list[TrialResult]) -> list[dict]:
                "sim_s": round(sim_s, 3),
                "pph_motion": round(3600.0 * succ / sim_s, 1) if sim_s > 0 else float("nan"),
                "wrong_target": sum(a.wrong_target for a in atts)}
+        devs = [a.path_deviation_m for a in atts if a.path_deviation_m is not None]
+        # how far the executed servo strayed from the path the run-time check predicted
+        row["path_deviation_mm_median"] = round(1000 * float(np.median(devs)), 2) if devs \
+            else float("nan")
+        row["path_deviation_mm_max"] = round(1000 * float(np.max(devs)), 2) if devs \
+            else float("nan")
         for o in OUTCOMES[1:]:
             row[f"fail_{o}"] = sum(a.outcome == o for a in atts)
         for e in TRIAL_ENDS:
             row[f"end_{e}"] = sum(r.end == e for r in rs)
         rows.append(row)
     return rows
-
-
-def _write_csv(path: Path, rows: list[dict]) -> None:
-    with open(path, "w", newline="") as f:
-        if not rows:
-            f.write("planner\n")
-            return
-        w = csv.DictWriter(f, fieldnames=list(rows[0]), lineterminator="\n")
-        w.writeheader()
-        w.writerows(rows)
 
 
 def convergence_rows(results: list[TrialResult]) -> list[dict]:
@@ -274,7 +270,7 @@ def evaluate(cfg: DictConfig) -> Path:
         raise ValueError(f"evaluate.num_trials must be >= 1, got {cfg.evaluate.num_trials}")
     check_renderer(str(cfg.camera.renderer))
     _check_choice("evaluate.retry_policy is", str(cfg.evaluate.retry_policy), RETRY_POLICIES)
-    _check_choice("evaluate.approach is", str(cfg.evaluate.approach), APPROACHES)
+    check_approach(str(cfg.motion.approach))
     upstream, train_dir, baseline_dir = {}, None, None
     if "dcnn" in planners:
         train_dir = resolve_artifact(Path(cfg.paths.models), "train", cfg.evaluate.train_version,
@@ -308,8 +304,9 @@ def evaluate(cfg: DictConfig) -> Path:
                   for r in results]
         (run.work_dir / "trials.json").write_text(json.dumps(trials, indent=1) + "\n")
         rows = summarise(results)
-        _write_csv(run.work_dir / "table3.csv", rows)
-        _write_csv(run.work_dir / "servo_convergence.csv", convergence_rows(results))
+        write_rows(run.work_dir / "table3.csv", rows, empty_header=("planner",))
+        write_rows(run.work_dir / "servo_convergence.csv", convergence_rows(results),
+                   empty_header=("planner",))
         run.metrics["table3"] = rows
         run.metrics["paper_table3"] = PAPER_TABLE3
         timings: dict = {"wall_s": round(wall, 2), "workers": workers, "planners": {}}

@@ -59,10 +59,11 @@ from pipeline.labelling.types import GraspClass
 from pipeline.tracking import StageLog, default_blueprint
 
 STAGE = "label"
-SECTIONS = ("hand", "surfaces", "label", "robot")
+SECTIONS = ("hand", "surfaces", "label", "robot", "motion")
 NOT_AFFECTING_RESULT = ("label.workers", "label.force", "label.generate_version")
 
-NG_REASONS = ("", "too_small", "center_occluded", "ik", "joint_limits", "collision")
+NG_REASONS = ("", "too_small", "center_occluded", "ik", "joint_limits", "collision",
+              "path_collision", "path_joint_limits", "path_timeout", "path_lost")
 CLASS_COLORS = {GraspClass.R: (230, 60, 60), GraspClass.L: (60, 200, 60),
                 GraspClass.B: (60, 120, 255), GraspClass.NG: (150, 150, 150)}
 

@@ -111,7 +111,8 @@ SECTIONS = ("report",)
 # The upstream versions cover which artifacts are read.
 NOT_AFFECTING_RESULT = ("report.force", "report.generate_version", "report.label_version",
                         "report.train_version", "report.baseline_version",
-                        "report.evaluate_version", "report.robustness_version")
+                        "report.evaluate_version", "report.robustness_version",
+                        "report.ablation_version")
 # Files whose content is measured wall-clock time: the same artifacts give other numbers on
 # another run, so `make repro-check` skips them (they are listed in metrics.volatile_files).
 VOLATILE_FILES = ("tables/planning_time.csv", "tables/table3_timing.csv")
@@ -283,13 +284,21 @@ LABEL_NOT_RUN = "Labelling: not run yet (`make label`)."
 # Where each NG reason is decided (pipeline.label): the hand level looks at the surface alone,
 # the robot level at the whole robot in the scene.
 NG_REASON_LEVEL = {"too_small": "hand", "center_occluded": "hand", "ik": "robot",
-                   "joint_limits": "robot", "collision": "robot"}
+                   "joint_limits": "robot", "collision": "robot", "path_collision": "robot",
+                   "path_joint_limits": "robot", "path_timeout": "robot", "path_lost": "robot"}
 NG_REASON_MEANING = {
     "too_small": "the cups do not fit on the visible surface",
     "center_occluded": "the centre of the visible region lies on another box",
     "ik": "inverse kinematics does not reach the target camera pose",
     "joint_limits": "it is reached only outside the joint limits",
     "collision": "it is reached only with the arm or hand touching the bin or another box",
+    "path_collision": "the pose is clear, but the servo's motion from home touches the bin, "
+                      "another box or the robot itself",
+    "path_joint_limits": "the servo from home, predicted on the exact surface, runs into the "
+                         "joint limits",
+    "path_timeout": "the servo from home, predicted on the exact surface, does not converge "
+                    "in time",
+    "path_lost": "the servo from home, predicted on the exact surface, loses sight of it",
 }
 # (manifest key, column header, Markdown format) of the surface-accuracy table.
 ACCURACY_COLUMNS = (
@@ -783,17 +792,21 @@ def resolve_evaluate(root: Path, version: str) -> EvaluateInfo | None:
 
 def table3_table(info: EvaluateInfo) -> Table:
     """Table 3: the paper's rows and ours (success rate; PPH of the robot's simulated motion)."""
-    headers = ["", "system", "hand", "success rate", "attempts", "mean PPH (motion only)"]
+    headers = ["", "system", "hand", "success rate", "attempts", "boxes picked",
+               "boxes picked (%)", "mean PPH (motion only)"]
     rows = []
     for r in info.metrics["paper_table3"]:
-        rows.append(["paper", r["system"], r["hand"], r["success"], None,
+        rows.append(["paper", r["system"], r["hand"], r["success"], None, None, None,
                      r["pph"] if r["pph"] is not None else None])
     for r in info.metrics["table3"]:
         rows.append(["this reproduction", PLANNER_LABELS.get(r["planner"], r["planner"]),
                      "suction (1 cup)" if r["planner"] == "dexnet" else "suction (2 cups)",
-                     100.0 * float(r["success_rate"]), int(r["attempts"]), r["pph_motion"]])
+                     _times(r["success_rate"]), int(r["attempts"]),
+                     f"{int(r['picked'])}/{int(r['boxes'])}",
+                     _pct(int(r["picked"]), int(r["boxes"])), r["pph_motion"]])
     return Table("table3_success", headers, rows,
-                 ["", "", "", "{:.1f} %", "{}", "{}"], csv_formats=["", "", "", "{:.3f}", "{}", "{}"],
+                 ["", "", "", "{:.1f} %", "{}", "{}", "{:.1f} %", "{}"],
+                 csv_formats=["", "", "", "{:.1f}", "{}", "{}", "{:.1f}", "{}"],
                  text_columns=3)
 
 
@@ -817,6 +830,15 @@ def table3_timing_table(info: EvaluateInfo) -> Table:
              v.get("descriptor_ms_median"), v.get("control_loop_hz"), v.get("sim_s_per_wall_s"),
              v.get("trial_wall_s_mean")] for k, v in t.items()]
     return Table("table3_timing", headers, rows)
+
+
+def path_deviation_table(info: EvaluateInfo) -> Table:
+    """How far the executed servo came from the path the run-time check predicted."""
+    headers = ["planner", "attempts", "median (mm)", "largest (mm)"]
+    rows = [[PLANNER_LABELS.get(r["planner"], r["planner"]), int(r["attempts"]),
+             _num(r.get("path_deviation_mm_median")), _num(r.get("path_deviation_mm_max"))]
+            for r in info.metrics["table3"]]
+    return Table("table3_path_deviation", headers, rows, ["", "{}", "{:.1f}", "{:.1f}"])
 
 
 def render_evaluate(info: EvaluateInfo | None, tables: dict[str, Table]) -> list[str]:
@@ -844,8 +866,80 @@ def render_evaluate(info: EvaluateInfo | None, tables: dict[str, Table]) -> list
         tables["table3_failures"].markdown(),
         *[f"- *{k}*: {v}" for k, v in FAILURE_MEANING.items()],
         "",
+        "The run-time check predicts the servo's camera path from home on the surface it "
+        "checks (`robot.path_check`, docs/closed_loop.md). The farthest the executed camera came "
+        "from that prediction, per attempt:",
+        "",
+        tables["table3_path_deviation"].markdown(),
         "CSV versions: [tables/table3_success.csv](tables/table3_success.csv), "
-        "[tables/table3_failures.csv](tables/table3_failures.csv).",
+        "[tables/table3_failures.csv](tables/table3_failures.csv), "
+        "[tables/table3_path_deviation.csv](tables/table3_path_deviation.csv).",
+        "",
+    ]
+    return out
+
+
+# ---------------------------------------------------------------------- ablation
+ABLATION_SECTION = "Ablation: what each execution extension contributes"
+ABLATION_NOT_RUN = "Ablation: not run yet (`make ablation`)."
+ABLATION_MEANING = {
+    "all_on": "every extension on (the defaults)",
+    "no_gate": "no run-time check: the best-ranked candidate is executed unchecked",
+    "no_path_check": "the check tests the grasp pose only, not the servo's path to it",
+    "approach_direct": "the paper's servo straight from home to d*",
+    "approach_pregrasp": "a pre-grasp on the surface normal instead of the lift",
+    "retry_repeat": "no memory of failed plans",
+    "paper_descriptor": "the paper's descriptor (fixed window tolerance, seed as it is)",
+    "paper_rotation": "the paper's axis rule only (no hand turned by 180° or 90°)",
+    "all_off": "all of the above off: the paper's execution",
+}
+
+
+def resolve_ablation(root: Path, version: str):
+    """(folder, rows) of the ablation artifact to report, or None when there is none."""
+    folder = _optional_artifact(root, "ablation", version)
+    if folder is None:
+        return None
+    rows = (load_manifest(folder).get("metrics") or {}).get("ablation")
+    if not isinstance(rows, list):
+        raise ArtifactError(f"{folder.name}/manifest.json (ablation) lacks metrics.ablation; "
+                            "recompute it with `make ablation` (ablation.force=true).")
+    return folder, rows
+
+
+def ablation_table(rows: list[dict]) -> Table:
+    headers = ["planner", "variant", "overrides", "success rate", "attempts", "boxes picked",
+               "boxes picked (%)", "PPH (motion)", "no seal", "dropped", "collision",
+               "lost target", "timeout", "trials ended: no grasp"]
+    out = [[r["planner"], r["variant"], r["overrides"], _times(r.get("success_rate")),
+            _int(r.get("attempts")), f"{_int(r.get('picked'))}/{_int(r.get('boxes'))}",
+            _pct(int(r["picked"]), int(r["boxes"])), _num(r.get("pph_motion")),
+            _int(r.get("fail_no_seal")), _int(r.get("fail_dropped")),
+            _int(r.get("fail_collision")), _int(r.get("fail_lost_target")),
+            _int(r.get("fail_timeout")), _int(r.get("end_no_grasp"))] for r in rows]
+    return Table("ablation", headers, out,
+                 ["", "", "", "{:.1f} %", "{}", "{}", "{:.1f} %", "{}", "{}", "{}", "{}", "{}",
+                  "{}", "{}"], text_columns=3)
+
+
+def render_ablation(ablation, tables: dict[str, Table]) -> list[str]:
+    out = [f"## {ABLATION_SECTION}", ""]
+    if ablation is None:
+        return out + [ABLATION_NOT_RUN, ""]
+    folder, rows = ablation
+    trials = sorted({int(r["boxes"]) for r in rows})
+    out += [
+        f"Ablation artifact `{folder.name}` (`python -m pipeline.ablation`): each extension "
+        "of the closed loop turned off on its own, then all at once, on the same heaps as "
+        "Table 3 (one evaluation artifact per row, named in the CSV). With the oracle planner "
+        "the labels and the run-time check follow the same switches, so a row shows what the "
+        "extension does to execution alone. Boxes per planner and variant: "
+        f"{', '.join(str(t) for t in trials)}.",
+        "",
+        tables["ablation"].markdown(),
+        *[f"- *{k}*: {v}" for k, v in ABLATION_MEANING.items()],
+        "",
+        "CSV version: [tables/ablation.csv](tables/ablation.csv).",
         "",
     ]
     return out
@@ -1167,7 +1261,7 @@ def render_readme(version: str, upstream: dict[str, tuple[str, dict]], tables: d
                   baseline: BaselineInfo | None = None,
                   evaluated: EvaluateInfo | None = None,
                   robustness: RobustnessInfo | None = None,
-                  robustness_note: str | None = None) -> str:
+                  robustness_note: str | None = None, ablation=None) -> str:
     phys = gen_cfg.get("physics", {})
     dt = float(phys.get("time_step", 1 / 240))
     cap = phys.get("max_settle_steps")
@@ -1196,6 +1290,8 @@ def render_readme(version: str, upstream: dict[str, tuple[str, dict]], tables: d
         out.append(f"| evaluate | not run yet (`make evaluate`) | {NONE} |")
     if robustness is None:
         out.append(f"| robustness | not run yet (`make robustness`) | {NONE} |")
+    if ablation is None:
+        out.append(f"| ablation | not run yet (`make ablation`) | {NONE} |")
     out += [
         "",
         "Each artifact lives in `data/<stage>/<version>/`; its `manifest.json` holds the full "
@@ -1229,6 +1325,7 @@ def render_readme(version: str, upstream: dict[str, tuple[str, dict]], tables: d
     out += render_train(trained, tables, pr_figure if pr_figure in figures else None)
     out += render_baseline(baseline, tables, figures)
     out += render_evaluate(evaluated, tables)
+    out += render_ablation(ablation, tables)
     out += render_robustness(robustness, tables,
                              ROBUSTNESS_FIGURE if ROBUSTNESS_FIGURE in figures else None,
                              robustness_note)
@@ -1311,6 +1408,7 @@ def report(cfg: DictConfig) -> Path:
                                 trained.version if trained is not None else None)
     evaluated = resolve_evaluate(root, str(cfg.report.evaluate_version))
     robustness = resolve_robustness(root, str(cfg.report.robustness_version))
+    ablated = resolve_ablation(root, str(cfg.report.ablation_version))
     robust_gen = robustness_generation(root, robustness) if robustness is not None else None
     config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
     if robustness is not None:
@@ -1331,6 +1429,8 @@ def report(cfg: DictConfig) -> Path:
         upstream["evaluate"] = evaluated.version
     if robustness is not None:
         upstream["robustness"] = robustness.version
+    if ablated is not None:
+        upstream["ablation"] = ablated[0].name
     version = compute_version(STAGE, config, upstream)
     gen_cfg = gen_manifest.get("config", {})
 
@@ -1354,8 +1454,10 @@ def report(cfg: DictConfig) -> Path:
                 tables[t.name] = t
         if evaluated is not None:
             for t in (table3_table(evaluated), failures_table(evaluated),
-                      table3_timing_table(evaluated)):
+                      table3_timing_table(evaluated), path_deviation_table(evaluated)):
                 tables[t.name] = t
+        if ablated is not None:
+            tables["ablation"] = ablation_table(ablated[1])
         if robustness is not None:
             for t in (robustness_sensor_table(robustness), robustness_table1_table(robustness),
                       robustness_table2_table(robustness),
@@ -1451,8 +1553,11 @@ def report(cfg: DictConfig) -> Path:
             used["evaluate"] = (evaluated.version, evaluated.manifest)
         if robustness is not None:
             used["robustness"] = (robustness.version, robustness.manifest)
+        if ablated is not None:
+            used["ablation"] = (ablated[0].name, load_manifest(ablated[0]))
         readme = render_readme(run.version, used, tables, figures, gen_cfg, stats, labels,
-                               trained, baseline, evaluated, robustness, robustness_note)
+                               trained, baseline, evaluated, robustness, robustness_note,
+                               ablated)
         (run.work_dir / "README.md").write_text(readme)
 
         with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version) as log:

@@ -26,7 +26,7 @@ from pipeline.tracking import rrd_equal
 from pipeline.view import MODEL_STAGES
 
 # The smoke pipeline, in order; later issues append their stages here.
-STAGES = ("generate", "label", "train", "baseline", "evaluate", "robustness", "report")
+STAGES = ("generate", "label", "train", "baseline", "evaluate", "ablation", "robustness", "report")
 
 
 

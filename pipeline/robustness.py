@@ -42,10 +42,7 @@ names the default pipeline's artifacts.
 
 from __future__ import annotations
 
-import csv
 import json
-import os
-from contextlib import contextmanager
 from pathlib import Path
 
 import hydra
@@ -53,25 +50,17 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from pipeline.artifacts import compute_version, run_stage, stage_config
+from pipeline.artifacts.csvfile import write_rows
 from pipeline.artifacts.store import StageRun
-from pipeline.cli import CONF_DIR, compose, data_root, stage_main
+from pipeline.cli import (
+    CONF_DIR, compose, data_root, own_overrides, scale_overrides, stage_main,
+)
 from pipeline.tracking import StageLog
 
 STAGE = "robustness"
 SECTIONS = ("seed", "robustness")
 NOT_AFFECTING_RESULT = ("robustness.force",)
 IDEAL, SENSOR = "ideal", "sensor"  # Table inputs; "sensor+<filter>": sensor depth, then a filter
-
-
-def _cli_overrides() -> list[str]:
-    """This command's own Hydra overrides, minus ``robustness.*`` (passed on to every stage)."""
-    try:
-        from hydra.core.hydra_config import HydraConfig
-
-        task = list(HydraConfig.get().overrides.task)
-    except ValueError:  # not under @hydra.main (tests, notebooks)
-        return []
-    return [o for o in task if not o.lstrip("+~").startswith("robustness.")]
 
 
 def _dir_name(path: Path | None) -> str:
@@ -95,18 +84,11 @@ class Pipelines:
         self.dirs: dict[str, Path] = {}
         self.stage_dirs = {s: (models if s == "train" else data) / s for s in self.STAGES}
 
-    @contextmanager
     def keep_latest(self):
         """Restore each stage's ``latest`` (where it existed) when the block ends."""
-        from pipeline.artifacts.store import LATEST, _point_latest
+        from pipeline.artifacts.pointers import keep_latest
 
-        before = {s: os.readlink(d / LATEST) for s, d in self.stage_dirs.items()
-                  if (d / LATEST).is_symlink()}
-        try:
-            yield
-        finally:
-            for stage, target in before.items():
-                _point_latest(self.stage_dirs[stage], target)
+        return keep_latest(self.stage_dirs.values())
 
     def _run(self, key: str, stage: str, extra: list[str]) -> Path:
         import importlib
@@ -245,14 +227,6 @@ def _json_safe(obj):
     return obj
 
 
-def _write_csv(path: Path, rows: list[dict]) -> None:
-    with open(path, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]) if rows else ["empty"],
-                           lineterminator="\n")
-        w.writeheader()
-        w.writerows(rows)
-
-
 def _log(log: StageLog, p: Pipelines, picks: dict, count: int, tables: dict) -> None:
     """Sample test images (ideal, sensor, filtered) with each planner's G_opt, and the tables."""
     from pipeline.baseline import _pixels_to_points
@@ -286,11 +260,7 @@ def robustness(cfg: DictConfig, overrides: list[str] | None = None) -> Path:
     """Run the study; returns its artifact folder. ``overrides``: passed to every stage it
     runs (the command line's own, by default none)."""
     rc = cfg.robustness
-    base = list(overrides or [])
-    if not any(o.startswith("experiment=") for o in base):
-        base.insert(0, f"experiment={cfg.experiment}")
-    if not any(o.startswith("paths.root=") for o in base):
-        base.append(f"paths.root={cfg.paths.root}")
+    base = scale_overrides(cfg, overrides)
     p = Pipelines(base, str(rc.sensor), data_root(cfg), Path(cfg.paths.models))
     progress = bool(cfg.logging.progress)
     radius = float(compose("train", base).train.match_radius_px)
@@ -318,9 +288,9 @@ def robustness(cfg: DictConfig, overrides: list[str] | None = None) -> Path:
     def body(run: StageRun) -> None:
         t1 = table1_rows(p, t1_inputs, radius, int(rc.max_images), progress)
         t2, picks = table2_rows(p, t2_inputs, int(rc.max_images), progress)
-        _write_csv(run.work_dir / "table1.csv", t1)
-        _write_csv(run.work_dir / "table2.csv", t2)
-        _write_csv(run.work_dir / "closed_loop.csv", cl)
+        write_rows(run.work_dir / "table1.csv", t1)
+        write_rows(run.work_dir / "table2.csv", t2)
+        write_rows(run.work_dir / "closed_loop.csv", cl)
         tables = {"table1": t1, "table2": t2, "closed_loop": cl,
                   "sensor": OmegaConf.to_container(
                       compose("generate", base + [f"sensor={rc.sensor}"]).sensor, resolve=True),
@@ -338,7 +308,7 @@ def robustness(cfg: DictConfig, overrides: list[str] | None = None) -> Path:
 
 @hydra.main(config_path=CONF_DIR, config_name="robustness", version_base="1.3")
 def main(cfg: DictConfig) -> None:
-    stage_main(lambda c: robustness(c, _cli_overrides()))(cfg)
+    stage_main(lambda c: robustness(c, own_overrides("robustness")))(cfg)
 
 
 if __name__ == "__main__":

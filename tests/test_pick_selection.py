@@ -1,9 +1,10 @@
 """Choosing what the robot executes: the run-time check gates every target, retries differ.
 
 Hand-worked on one box lying flat in the middle of the bin (its top face at the image centre
-is reachable with both cups) and on the bin floor 2 cm from the +y wall (y = 0.13 m): with both
-cups on, the camera's x along the image x (world x) puts a cup 35 mm to each side in world y,
-one at y = 0.165 m, inside the wall (its inner face is at 0.15 m): a rejection.
+is reachable with both cups) and on a pixel of the bin floor 2 cm from the +y wall. The servo
+of a DCNN candidate tracks the centre of the surface the descriptor grows at its pixel, so that
+is what the check tests: for the floor pixel, the floor around the box, whose centre is the bin
+centre, under the box: the hand would be inside the box, a rejection.
 """
 
 from __future__ import annotations
@@ -62,6 +63,7 @@ def test_a_reachable_target_is_chosen_and_a_rejected_one_never(runner):
     # nothing passes: no grasp (the trial ends), G_opt is not run anyway
     assert runner.select(frame, [bad, bad], []) is None
     runner.plans.append([bad])
+    runner.cell.reset = lambda rng, count: None  # the trial keeps this heap
     result = runner.run_trial(0, np.random.default_rng(0), np.random.default_rng(1))
     assert result.end == "no_grasp" and result.attempts == []
 
@@ -161,15 +163,22 @@ def test_lifted_goal_by_hand(runner):
     """Home camera looking straight down at a level face 0.5 m away. The grasp pose for B is
     0.15 m above the centre (seen at (0, 0, 0.15)); lifted by 0.30 − 0.15 = 0.15 m it sees the
     centre at (0, 0, 0.30). For L the camera sits 35 mm to the side, so the centre is seen at
-    y = −0.035 m, at either height."""
+    y = −0.035 m, at either height. The pre-grasp on the normal is the full 0.30 m (the camera
+    and cups are far from the walls)."""
     T_home = runner.cell.robot.home_camera_pose()
     centre, feats = _level_face()
-    cfg, h = runner._lifted_goal(centre, feats, None, "B", T_home)
-    assert h == pytest.approx(0.15)
+    runner.cfg.motion.approach = "lift"
+    cfg, d = runner._first_goal(centre, feats, None, "B", T_home)
+    assert d == pytest.approx(0.30)
     assert cfg.target_point == pytest.approx((0.0, 0.0, 0.30), abs=1e-9)
-    cfg, h = runner._lifted_goal(centre, feats, None, "L", T_home)
+    cfg, d = runner._first_goal(centre, feats, None, "L", T_home)
     assert cfg.target_point == pytest.approx((0.0, -0.035, 0.30), abs=1e-9)
-    assert runner._pregrasp_standoff(centre, feats, None, "B", T_home) == pytest.approx(0.30)
+    runner.cfg.motion.approach = "pregrasp"
+    cfg, d = runner._first_goal(centre, feats, None, "B", T_home)
+    assert d == pytest.approx(0.30) and cfg.standoff == pytest.approx(0.30)
+    runner.cfg.motion.approach = "direct"
+    cfg, d = runner._first_goal(centre, feats, None, "B", T_home)
+    assert d == pytest.approx(0.15) and cfg is runner.servo_cfg
 
 
 def test_lift_is_cut_to_keep_a_steep_face_in_view(runner):
@@ -182,8 +191,9 @@ def test_lift_is_cut_to_keep_a_steep_face_in_view(runner):
     feats = SimpleNamespace(normal_cam=normal, long_axis_cam=np.array([1.0, 0, 0]),
                             short_axis_cam=np.cross(normal, [1.0, 0, 0]),
                             warped_long=np.array([1.0, 0, 0]), warped_short=np.array([0, 1.0, 0]))
-    cfg, h = runner._lifted_goal(np.array([0.0, 0.0, 0.5]), feats, None, "B", T_home)
-    assert 0 < h < 0.15
+    runner.cfg.motion.approach = "lift"
+    cfg, d = runner._first_goal(np.array([0.0, 0.0, 0.5]), feats, None, "B", T_home)
+    assert 0.15 < d < 0.30
     x, y, z = cfg.target_point
     intr = runner.cell.intrinsics
     assert abs(y / z) <= 0.7 * intr.cy / intr.fy and abs(x / z) <= 0.7 * intr.cx / intr.fx

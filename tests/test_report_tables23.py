@@ -2,7 +2,9 @@
 
 from pathlib import Path
 
-from pipeline.report import ArtifactInfo, failures_table, table2_table, table3_table
+from pipeline.report import (
+    ArtifactInfo, ablation_table, failures_table, path_deviation_table, table2_table, table3_table,
+)
 
 
 def test_table2_puts_the_paper_beside_every_planner():
@@ -23,7 +25,8 @@ def test_table2_puts_the_paper_beside_every_planner():
 
 def test_table3_rows_and_failures():
     row = {"planner": "dcnn", "success_rate": 0.75, "attempts": 8, "pph_motion": 1100.0,
-           "wrong_target": 1, **{f"fail_{k}": 0 for k in ("no_seal", "dropped", "collision",
+           "picked": 6, "boxes": 12, "wrong_target": 1,
+           "path_deviation_mm_median": 2.54, "path_deviation_mm_max": float("nan"), **{f"fail_{k}": 0 for k in ("no_seal", "dropped", "collision",
                                                           "joint_limits", "timeout",
                                                           "lost_target")},
            **{f"end_{e}": 0 for e in ("bin_empty", "no_grasp", "max_failures", "max_attempts")}}
@@ -35,5 +38,23 @@ def test_table3_rows_and_failures():
     md = table3_table(info).markdown()
     assert "97.5" in md and "over 1000" in md
     assert "75.0 %" in md and "1100.0" in md
+    assert "| 6/12 | 50.0 % |" in md  # boxes picked, and their share
+    dev = path_deviation_table(info).markdown()
+    assert "| 8 | 2.5 | — |" in dev  # a missing deviation (no prediction) shows as —
     f = failures_table(info).csv_text().splitlines()
     assert f[1] == "dcnn,0,0,2,0,0,0,1,1,0,0,0"
+
+
+def test_ablation_table_by_hand():
+    """One row: 9 of 10 attempts, 9 of 12 boxes (75 %), the overrides as text, a missing
+    success rate (no attempt) shown as —."""
+    row = {"planner": "oracle", "variant": "no_gate", "overrides":
+           "evaluate.check_reachability=false", "success_rate": 0.9, "attempts": 10,
+           "picked": 9, "boxes": 12, "pph_motion": 990.5, "fail_no_seal": 1,
+           "fail_dropped": 0, "fail_collision": 0, "fail_lost_target": 0, "fail_timeout": 0,
+           "end_no_grasp": 2}
+    empty = dict(row, variant="all_off", success_rate=None, attempts=0, picked=0)
+    md = ablation_table([row, empty]).markdown().splitlines()
+    assert md[2] == ("| oracle | no_gate | evaluate.check_reachability=false | 90.0 % | 10 | "
+                     "9/12 | 75.0 % | 990.5 | 1 | 0 | 0 | 0 | 0 | 2 |")
+    assert md[3].startswith("| oracle | all_off | evaluate.check_reachability=false | — | 0 |")

@@ -195,6 +195,10 @@ class RobotSchema:
     orientation_tolerance_deg: float = 1.0
     collision_margin: float = 0.005
     self_collision_margin: float = 0.0
+    path_check: bool = True  # check the approach path, not only the grasp pose
+    path_step_m: float = 0.01
+    path_step_deg: float = 2.0
+    path_bin_clearance: float = 0.0
 
 
 @dataclass
@@ -329,6 +333,7 @@ class MotionSchema:
     pregrasp_standoff: float = 0.30  # m, the pre-grasp's largest distance along the normal
     pregrasp_wall_margin: float = 0.01  # m, camera and cup lips this far inside the walls
     pregrasp_image_fraction: float = 0.7  # lift: the centre within this share of the half-FOV
+    approach: str = "lift"  # "lift" | "pregrasp" | "direct" (the paper: straight to d*)
 
 
 @dataclass
@@ -337,6 +342,7 @@ class ServoSchema:
 
     window: int = 21
     window_tolerance_depth: float = 0.0  # m; > 0: window RANSAC tolerance ε1·min(1, Z/this)
+    seed_repair: bool = True  # crack and small-component repairs of the seed
     eps_distance: float = 0.004
     eps_normal: float = 0.05
     min_pixels: int = 50
@@ -363,7 +369,6 @@ class EvaluateConfig:
     check_reachability: bool = True  # run-time robot-level check of the planned grasp
     max_candidates_checked: int = 50
     retry_policy: str = "skip_failed"  # "skip_failed" | "repeat" (the plain protocol)
-    approach: str = "lift"  # "lift" | "pregrasp" | "direct" (the paper: straight to d*)
     retry_same_point_m: float = 0.03
     retry_moved_m: float = 0.005
     retry_moved_deg: float = 5.0
@@ -407,6 +412,24 @@ class RobustnessConfig:
 
 
 @dataclass
+class AblationVariant:
+    """One closed-loop run of the ablation: a name and its evaluate-stage overrides."""
+
+    name: str = MISSING
+    overrides: List[str] = field(default_factory=list)
+
+
+@dataclass
+class AblationConfig:
+    """The execution ablation (``pipeline.ablation``): each variant an evaluation artifact."""
+
+    planners: List[str] = field(default_factory=lambda: ["oracle"])
+    trials: int = 10
+    variants: List[AblationVariant] = field(default_factory=list)
+    force: bool = False
+
+
+@dataclass
 class ReportConfig:
     """The report stage: which artifacts to gather and how many sample images to draw."""
 
@@ -417,6 +440,7 @@ class ReportConfig:
     evaluate_version: str = "latest"  # no evaluate artifact at all: the report leaves Table 3 out
     # no robustness artifact at all: the report leaves the robustness section out
     robustness_version: str = "latest"
+    ablation_version: str = "latest"  # no ablation artifact at all: the report leaves it out
     num_sample_images: int = 6
     force: bool = False
 
@@ -476,6 +500,7 @@ class PipelineConfig:
     servo: ServoSchema = field(default_factory=ServoSchema)
     evaluate: EvaluateConfig = field(default_factory=EvaluateConfig)
     robustness: RobustnessConfig = field(default_factory=RobustnessConfig)
+    ablation: AblationConfig = field(default_factory=AblationConfig)
     eval_boxes: BoxesConfig = field(default_factory=BoxesConfig)
     logging: LoggingConfig = field(default_factory=LoggingConfig)
     executor: ExecutorConfig = field(default_factory=ExecutorConfig)

@@ -50,6 +50,7 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
+from typing import Optional
 
 import numpy as np
 import pybullet as p
@@ -87,6 +88,9 @@ class Attempt:
     phase: str = ""  # where a collision happened: "servo" or "approach"
     pregrasp_standoff: float = 0.0  # m, the pre-grasp's distance along the normal (0: none)
     lost_reason: str = ""  # the descriptor's reason when the target was lost
+    # m: farthest the executed camera came from the servo path the run-time check predicted
+    # (robot.path_check; None without a prediction)
+    path_deviation_m: Optional[float] = None
 
     @property
     def sim_s(self) -> float:
@@ -159,27 +163,21 @@ class PickRunner:
     def __init__(self, cfg, cell: PickCell, planner, planner_name: str) -> None:
         from pipeline.picking.suction import SuctionGripper
         from pipeline.dexnet.contact import SuctionModelConfig
-        from pipeline.servo.control import ServoConfig
+        from pipeline.servo.control import servo_config
         from pipeline.servo.descriptor import DescriptorConfig
 
         self.cfg, self.cell, self.planner, self.name = cfg, cell, planner, planner_name
-        s, m = cfg.servo, cfg.motion
+        s = cfg.servo
         self.dt = 1.0 / float(s.control_rate_hz)
         self.descriptor_cfg = DescriptorConfig(window=int(s.window),
                                                window_tolerance_depth=float(
                                                    s.window_tolerance_depth),
+                                               seed_repair=bool(s.seed_repair),
                                                eps_distance=float(s.eps_distance),
                                                eps_normal=float(s.eps_normal),
                                                min_pixels=int(s.min_pixels),
                                                normal_smoothing=int(s.normal_smoothing))
-        self.servo_cfg = ServoConfig(gain=float(s.gain), standoff=float(cfg.hand.standoff),
-                                     cup_offset=float(cfg.hand.cup_offset),
-                                     tolerance_xy=float(s.tolerance_xy),
-                                     tolerance_log_z=float(s.tolerance_log_z),
-                                     tolerance_rot_deg=float(s.tolerance_rot_deg),
-                                     max_linear_speed=float(m.servo_max_linear_speed),
-                                     max_angular_speed=float(m.servo_max_angular_speed),
-                                     gain_per_step=bool(s.gain_per_step))
+        self.servo_cfg = servo_config(cfg)
         su = cfg.suction
         self.suction_cfg = SuctionModelConfig(
             cup_radius=float(cfg.hand.cup_diameter) / 2.0, vacuum_force=float(su.vacuum_force),
@@ -189,6 +187,7 @@ class PickRunner:
         self.gripper_factory = lambda: SuctionGripper(cell.client, cell.robot, self.suction_cfg,
                                                       float(cfg.hand.cup_offset))
         self._place_q: np.ndarray | None = None
+        self.predicted_path: list | None = None  # of the last grasp the run-time check passed
         # wall time of the parts of a control step (seconds, one entry per call)
         self.timings: dict[str, list[float]] = {
             "descriptor_s": [], "control_step_s": [], "render_s": [], "control_law_s": [],
@@ -243,6 +242,16 @@ class PickRunner:
         if z <= 0:
             return None
         return np.array([(cand.u - intr.cx) / intr.fx * z, (cand.v - intr.cy) / intr.fy * z, z])
+
+    @staticmethod
+    def _fixed_point(cand) -> np.ndarray | None:
+        """The point (3,) in the home camera that the servo holds fixed: a single suction
+        point's own (Dex-Net's ``point_cam``); None for a DCNN or oracle candidate, whose servo
+        tracks the centre of the surface the descriptor finds in each frame."""
+        if getattr(cand, "grasp_class", None) is None and getattr(cand, "point_cam", None) \
+                is not None:
+            return np.asarray(cand.point_cam, np.float64)
+        return None
 
     def _target_of(self, frame: Frame, cand) -> tuple[int, np.ndarray | None]:
         """(the box under the candidate at home, −1 for none; its point in the world frame, or
@@ -303,95 +312,44 @@ class PickRunner:
         return False
 
     def _reachable(self, frame: Frame, cand, pattern: str, target: int) -> np.ndarray | None:
-        """The robot-level check of the labelling stage for a grasp at the candidate: the
-        descriptor finds the surface at the point (a failure is a rejection), and the target
-        camera pose (the active cup on the point, camera X along the surface axis nearer the
-        image X, turned about the normal by the first of ``hand.rotations_deg`` that works) is
-        reachable without touching the bin or another box.
+        """The robot-level check of the labelling stage for a grasp at the candidate
+        (``pipeline.labelling.robot_check.check_grasp``: the grasp pose and, with
+        ``robot.path_check``, the servo's predicted motion from home to it): the descriptor must
+        find the surface at the point (a failure is a rejection); camera X along the surface
+        axis nearer the image X, turned about the normal by the first of ``hand.rotations_deg``
+        that works. Keeps the predicted camera poses in ``predicted_path``.
 
         Returns the hand's X axis (3,) in the world frame of the pose that passed, or None."""
-        from pipeline.robot.target_pose import hand_rotations, rotate_about, target_camera_pose
+        from pipeline.labelling.robot_check import check_grasp
         from pipeline.servo.descriptor import describe_surface
 
         feats, _ = describe_surface(frame.depth_m, self.cell.intrinsics,
                                     np.array([cand.u, cand.v], np.float64), self.descriptor_cfg)
-        point = self._point_cam(frame, cand)
-        if feats is None or point is None:
+        if feats is None:
             return None
-        x_axis = paper_x_axis(feats)
-        robot = self.cell.robot
-        hand = self.cfg.hand
-        try:
-            for rot in hand_rotations(pattern, hand.rotations_deg):
-                x_rot = rotate_about(x_axis, feats.normal_cam, rot)
-                T = target_camera_pose(point, feats.normal_cam, x_rot, pattern,
-                                       standoff=float(hand.standoff),
-                                       cup_offset=float(hand.cup_offset))
-                res = robot.solve_ik(frame.T_world_cam @ T, seed_q=robot.home_q(),
-                                     obstacle_ids=self.cell.obstacles,
-                                     ignore_body_ids=[target] if target >= 0 else [])
-                if res.ok:
-                    return frame.T_world_cam[:3, :3] @ (T[:3, 0])
-        finally:
-            robot.set_joints(robot.home_q())
-        return None
+        # where the servo will put the active cup: the planner's own point (Dex-Net), else the
+        # centre of the surface the descriptor finds at the candidate (what the servo tracks)
+        fixed = self._fixed_point(cand)
+        centre = feats.center_cam if fixed is None else fixed
+        check = check_grasp(self.cell.robot, self.cfg, self.cfg.hand, frame.T_world_cam, centre,
+                            feats.normal_cam, feats.long_axis_cam, feats.short_axis_cam,
+                            paper_x_axis(feats), pattern, self.cell.intrinsics,
+                            self.cell.obstacles, [target] if target >= 0 else [],
+                            self.cell.cell_ids[1:])
+        self.predicted_path = check.path
+        return check.x_world
 
-    def _pregrasp_standoff(self, centre_cam: np.ndarray, feats, ref_cam, pattern: str,
-                           T_world_cam: np.ndarray) -> float:
-        """The pre-grasp's distance from the surface along its normal: the largest of
-        ``motion.pregrasp_standoff`` (0.30 m) down to d* in 1 cm steps at which the camera and
-        both cup lips stay inside the bin walls' vertical planes (less ``pregrasp_wall_margin``),
-        so that the final descent along the normal cannot sweep a wall; d* when none does (the
-        paper's direct approach)."""
-        from pipeline.robot.target_pose import target_camera_pose
-        from pipeline.robot.urdf_builder import CUP_TIP_Z
+    def _first_goal(self, centre_cam: np.ndarray, feats, ref_cam, pattern: str,
+                    T_world_cam: np.ndarray):
+        """(servo config of ``motion.approach``'s first goal, its distance from the surface):
+        ``pipeline.robot.approach.first_goal`` for the descriptor's surface at home, the hand's
+        X along ``ref_cam`` (None: the paper's axis)."""
+        from pipeline.robot.approach import first_goal
 
-        hand, m, b = self.cfg.hand, self.cfg.motion, self.cfg.bin
         if ref_cam is None:
             ref_cam = paper_x_axis(feats)
-        d_star, d_max = float(hand.standoff), float(m.pregrasp_standoff)
-        hx = float(b.inner_length_x) / 2 - float(m.pregrasp_wall_margin)
-        hy = float(b.inner_width_y) / 2 - float(m.pregrasp_wall_margin)
-        off = float(hand.cup_offset)
-        points = np.array([[0, 0, 0], [0, -off, CUP_TIP_Z], [0, off, CUP_TIP_Z]], np.float64)
-        for d in np.arange(d_max, d_star, -0.01):
-            try:
-                T = T_world_cam @ target_camera_pose(centre_cam, feats.normal_cam, ref_cam,
-                                                     pattern, standoff=float(d), cup_offset=off)
-            except ValueError:
-                return d_star
-            w = points @ T[:3, :3].T + T[:3, 3]
-            if (np.abs(w[:, 0]) <= hx).all() and (np.abs(w[:, 1]) <= hy).all():
-                return float(d)
-        return d_star
-
-    def _lifted_goal(self, centre_cam: np.ndarray, feats, ref_cam, pattern: str,
-                     T_world_cam: np.ndarray):
-        """Servo goal of the "lift" approach: the grasp pose raised straight up (world z),
-        orientation unchanged; from there the 2.5D VS descends (nearly) vertically onto the grasp
-        pose, so the cups come down from above the walls. The lift is the largest of
-        ``motion.pregrasp_standoff`` − d* down to 0 (1 cm steps) at which the surface centre
-        stays in the central ``motion.pregrasp_image_fraction`` of the image (a steep face
-        slides sideways in the view as the camera rises)."""
-        from pipeline.robot.target_pose import target_camera_pose
-
-        hand = self.cfg.hand
-        if ref_cam is None:
-            ref_cam = paper_x_axis(feats)
-        T = target_camera_pose(centre_cam, feats.normal_cam, ref_cam, pattern,
-                               standoff=float(hand.standoff), cup_offset=float(hand.cup_offset))
-        R_cam_goal = T[:3, :3]  # goal camera axes in the current camera frame
-        up_cam = T_world_cam[:3, :3].T @ np.array([0.0, 0.0, 1.0])
-        intr, frac = self.cell.intrinsics, float(self.cfg.motion.pregrasp_image_fraction)
-        lim_x, lim_y = frac * intr.cx / intr.fx, frac * intr.cy / intr.fy
-        h_max = float(self.cfg.motion.pregrasp_standoff) - float(hand.standoff)
-        for h in np.arange(h_max, 0.0, -0.01):
-            point = R_cam_goal.T @ (centre_cam - (T[:3, 3] + h * up_cam))  # seen from the goal
-            if point[2] > 0 and abs(point[0] / point[2]) <= lim_x and \
-                    abs(point[1] / point[2]) <= lim_y:
-                return dataclasses.replace(self.servo_cfg,
-                                           target_point=tuple(float(x) for x in point)), float(h)
-        return self.servo_cfg, 0.0
+        return first_goal(self.servo_cfg, self.cfg, T_world_cam, centre_cam, feats.normal_cam,
+                          ref_cam, pattern, self.cell.intrinsics)
 
     def _render(self) -> Frame:
         t0 = time.perf_counter()
@@ -431,10 +389,14 @@ class PickRunner:
         return self._describe(contacts)
 
     def _describe(self, contacts) -> list[str]:
-        """Contacts as "robot link:bin|box" strings (sorted, unique), for the failure records."""
-        bin_ids = set(self.cell.cell_ids)
-        return sorted({f"{c.robot_link}:{'bin' if c.other_body in bin_ids else 'box'}"
-                       for c in contacts})
+        """Contacts as "robot link:bin|box|self" strings (sorted, unique), for the failure
+        records ("self": the robot touches itself)."""
+        bin_ids, rid = set(self.cell.cell_ids), self.cell.robot.body_id
+
+        def what(body: int) -> str:
+            return "self" if body == rid else "bin" if body in bin_ids else "box"
+
+        return sorted({f"{c.robot_link}:{what(c.other_body)}" for c in contacts})
 
     def _place_joints(self) -> np.ndarray:
         """Joints of the conveyor pose (camera at ``motion.place_position`` looking down)."""
@@ -479,11 +441,14 @@ class PickRunner:
                       planning_s=planning_s)
         # Dex-Net: the servo target is its own point, fixed in the world.
         fixed_point_world = None
-        if getattr(cand, "grasp_class", None) is None and hasattr(cand, "point_cam"):
+        fixed = self._fixed_point(cand)
+        if fixed is not None:
             T = frame.T_world_cam
-            fixed_point_world = T[:3, :3] @ np.asarray(cand.point_cam) + T[:3, 3]
+            fixed_point_world = T[:3, :3] @ fixed + T[:3, 3]
 
         q = robot.joints()
+        predicted = self.predicted_path if x_world is not None else None
+        executed = [robot.camera_pose()[:3, 3]]
         seed = np.array([cand.u, cand.v], np.float64)
         limit_hits = 0
         steps_max = int(math.ceil(float(cfg.servo.timeout_s) / self.dt))
@@ -514,15 +479,9 @@ class PickRunner:
                 frame.T_world_cam[:3, 3]
             tc = time.perf_counter()
             ref = None if x_world is None else T_cam_world[:3, :3] @ x_world
-            if step == 0 and str(cfg.evaluate.approach) == "pregrasp":
-                d_pre = self._pregrasp_standoff(np.asarray(centre), feats, ref, pattern,
-                                                frame.T_world_cam)
-                att.pregrasp_standoff = d_pre
-                servo_cfg = dataclasses.replace(self.servo_cfg, standoff=d_pre)
-            elif step == 0 and str(cfg.evaluate.approach) == "lift":
-                servo_cfg, lift = self._lifted_goal(np.asarray(centre), feats, ref, pattern,
-                                                    frame.T_world_cam)
-                att.pregrasp_standoff = float(cfg.hand.standoff) + lift
+            if step == 0:
+                servo_cfg, att.pregrasp_standoff = self._first_goal(
+                    np.asarray(centre), feats, ref, pattern, frame.T_world_cam)
             cmd = servo_velocity(centre, feats.normal_cam, feats.warped_long, feats.warped_short,
                                  pattern, servo_cfg, self.dt, reference_x=ref)
             self.timings["control_law_s"].append(time.perf_counter() - tc)
@@ -549,6 +508,7 @@ class PickRunner:
             if step == steps_max:
                 break
             q, clamped = self._move_twist(q, np.asarray(cmd.velocity, np.float64))
+            executed.append(robot.camera_pose()[:3, 3])
             if fixed_point_world is None:
                 # The next seed is this g′, moved into the next image by the camera's own motion
                 # (forward kinematics): the paper seeds with the previous g′; at 30 Hz and up to
@@ -565,6 +525,11 @@ class PickRunner:
             if contacts:
                 att.outcome, att.collided, att.phase = "collision", contacts, "servo"
                 break
+        if predicted is not None:
+            from pipeline.robot.path import distance_to_path
+
+            att.path_deviation_m = float(distance_to_path(
+                np.array(executed), np.array([T[:3, 3] for T in predicted])).max())
         if att.outcome:
             return self._go_home(att)
         if not converged:

@@ -350,7 +350,8 @@ class Robot:
 
     # ----------------------------------------------------------------------------- collisions
     def in_collision(self, q: Sequence[float] | None, obstacle_body_ids: Sequence[int],
-                     ignore_body_ids: Sequence[int] = ()) -> list[Contact]:
+                     ignore_body_ids: Sequence[int] = (), margin: float | None = None,
+                     self_collision: bool = True) -> list[Contact]:
         """Robot links within the margin of an obstacle, or of each other, at ``q``.
 
         Args:
@@ -358,6 +359,8 @@ class Robot:
             obstacle_body_ids: single-link bodies to keep clear of (ground, bin parts, boxes);
                 their base AABB is the broad-phase filter.
             ignore_body_ids: bodies to skip, e.g. the target box the cups are meant to touch.
+            margin: the obstacles' margin (None: ``collision_margin``), metres.
+            self_collision: also check the robot against itself.
 
         Returns:
             One :class:`Contact` per (robot link, other body) pair closer than
@@ -369,7 +372,8 @@ class Robot:
         if q is not None:
             self.set_joints(q)
         cid, rid = self.client, self.body_id
-        margin, self_margin = self.cfg.collision_margin, self.cfg.self_collision_margin
+        margin = self.cfg.collision_margin if margin is None else float(margin)
+        self_margin = self.cfg.self_collision_margin
         # Axis-aligned boxes first: getClosestPoints only for pairs whose boxes (grown by the
         # margin) overlap. This cuts the check from ~0.2 ms to a few hundredths.
         boxes = {j: p.getAABB(rid, j, physicsClientId=cid) for j in self._links}
@@ -384,7 +388,7 @@ class Robot:
                     continue
                 if p.getClosestPoints(rid, body, margin, linkIndexA=link, physicsClientId=cid):
                     found.append(Contact(self.link_name[link], body))
-        for a, b in self.self_collision_pairs:
+        for a, b in (self.self_collision_pairs if self_collision else ()):
             if _overlap(boxes[a], boxes[b], self_margin) and p.getClosestPoints(
                     rid, rid, self_margin, linkIndexA=a, linkIndexB=b, physicsClientId=cid):
                 found.append(Contact(self.link_name[a], rid))

@@ -98,6 +98,19 @@ class ServoConfig:
     target_point: Optional[tuple] = None
 
 
+def servo_config(cfg) -> ServoConfig:
+    """The ``ServoConfig`` of a pipeline config: ``cfg.servo`` (gain, tolerances), d* and the
+    cup offset from ``cfg.hand``, the speed limits from ``cfg.motion``."""
+    s, m = cfg.servo, cfg.motion
+    return ServoConfig(gain=float(s.gain), standoff=float(cfg.hand.standoff),
+                       cup_offset=float(cfg.hand.cup_offset), tolerance_xy=float(s.tolerance_xy),
+                       tolerance_log_z=float(s.tolerance_log_z),
+                       tolerance_rot_deg=float(s.tolerance_rot_deg),
+                       max_linear_speed=float(m.servo_max_linear_speed),
+                       max_angular_speed=float(m.servo_max_angular_speed),
+                       gain_per_step=bool(s.gain_per_step))
+
+
 @dataclass
 class ServoCommand:
     """One output of :func:`servo_velocity`.

@@ -142,6 +142,10 @@ class DescriptorConfig:
             fixed pixel size shrinks on the surface as the camera approaches: at 0.16 m a
             21 × 21 window spans 8 mm, and a plane steeper than the face can then hold most of
             its points within ε1 = 4 mm.
+        seed_repair: the plane through the 3 × 3 median depth when the seed pixel is more than
+            ε1 from it (a crack), and the nearest component of at least ``min_pixels`` when the
+            seed's own is smaller (False: the seed's depth and component as they are, the
+            nearest rule pixel only when the seed fails the rules).
     """
 
     window: int = 21
@@ -155,6 +159,7 @@ class DescriptorConfig:
     normal_smoothing: int = 0
     refine: bool = True
     window_tolerance_depth: float = 0.0  # m; > 0: window RANSAC tolerance ε1·min(1, Z/this)
+    seed_repair: bool = True
 
 
 @dataclass
@@ -379,7 +384,7 @@ def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
     z_seed = float(Z[v, u])
     around = Z[max(v - 1, 0):v + 2, max(u - 1, 0):u + 2]
     z_around = float(np.median(around[around > 0]))
-    if abs(z_seed - z_around) > cfg.eps_distance:
+    if cfg.seed_repair and abs(z_seed - z_around) > cfg.eps_distance:
         z_seed = z_around
     seed_point = z_seed * np.array([xn[u], yn[v], 1.0], dtype=np.float64)
     n_hat, c_hat = _window_plane(win, seed_point, cfg)
@@ -425,7 +430,7 @@ def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
     _, labels = cv2.connectedComponents(rules.view(np.uint8), connectivity=cfg.connectivity)
     label = int(labels[v - r0, u - c0]) if (r0 <= v < r1 and c0 <= u < c1) else 0
     sizes = np.bincount(labels.ravel())
-    if label == 0 or sizes[label] < cfg.min_pixels:
+    if label == 0 or (cfg.seed_repair and sizes[label] < cfg.min_pixels):
         # the seed fails the rules, or its component is no surface (a one-pixel depth outlier
         # at the seed passes Eq. 13 itself while its four neighbours fail it): the nearest rule
         # pixel in the window ...
@@ -436,7 +441,7 @@ def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
             return None, "no_region_at_seed"
         # ... of a component of at least min_pixels when the window meets one
         big = sizes[wl[lv, lu]] >= cfg.min_pixels
-        if big.any():
+        if cfg.seed_repair and big.any():
             lv, lu = lv[big], lu[big]
         k = int(np.argmin((lv + a0 - v) ** 2 + (lu + b0 - u) ** 2))
         label = int(wl[lv[k], lu[k]])

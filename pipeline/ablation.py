@@ -1,0 +1,117 @@
+"""Ablation of the closed loop's execution: each extension on and off, on the same heaps.
+
+    python -m pipeline.ablation [experiment=default] [ablation.planners=[oracle,dcnn]]
+
+Each variant of ``ablation.variants`` (``conf/ablation.yaml``) is one run of the evaluation
+stage with the variant's overrides, for each planner of ``ablation.planners`` and
+``ablation.trials`` trials, on the evaluation's own heaps (they depend only on ``seed`` and the
+trial index). Every run is an evaluation artifact of its own (reused when its version exists);
+this stage gathers their Table 3 rows:
+
+    ablation.csv    planner, variant, overrides, success rate, attempts, successes, boxes picked,
+                    PPH (motion), failure counts, trial ends, the evaluation's version
+    ablation.json   the same rows
+
+The oracle planner (the labels computed on the home image) is the default: its labels and its
+run-time check follow the same switches, so each row isolates what the extension does to
+execution. For the DCNN the network is the one trained on the default labels; a variant changes
+only its run-time execution. The evaluation stage's ``latest`` is put back afterwards, so that it
+still names the ``make reproduce`` evaluation.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import hydra
+from omegaconf import DictConfig
+
+from pipeline.artifacts import compute_version, run_stage, stage_config
+from pipeline.artifacts.csvfile import write_rows
+from pipeline.artifacts.store import StageRun
+from pipeline.cli import (
+    CONF_DIR, compose, data_root, own_overrides, scale_overrides, stage_main,
+)
+from pipeline.tracking import StageLog
+
+STAGE = "ablation"
+SECTIONS = ("seed", "ablation")
+NOT_AFFECTING_RESULT = ("ablation.force",)
+PLANNERS = ("dcnn", "dexnet", "oracle")
+ROW_KEYS = ("success_rate", "attempts", "successes", "picked", "boxes", "pph_motion",
+            "path_deviation_mm_median", "path_deviation_mm_max")
+
+
+def _finite(value):
+    """NaN (e.g. the success rate of a run without attempts) → None (JSON null)."""
+    return None if isinstance(value, float) and math.isnan(value) else value
+
+
+def run_variants(cfg: DictConfig, base: list[str]) -> list[dict]:
+    """One evaluation per (planner, variant) and its Table 3 row, in config order."""
+    from pipeline.artifacts.pointers import keep_latest
+    from pipeline.evaluate import evaluate
+
+    ab = cfg.ablation
+    rows = []
+    with keep_latest([data_root(cfg) / "evaluate"]):
+        for planner in ab.planners:
+            for v in ab.variants:
+                overrides = [str(o) for o in v.overrides]
+                extra = [f"planner={planner}", f"evaluate.num_trials={int(ab.trials)}",
+                         *overrides]
+                print(f"[{STAGE}] {planner} / {v.name}: evaluate {' '.join(base + extra)}",
+                      flush=True)
+                out = Path(evaluate(compose("evaluate", base + extra)))
+                t3 = json.loads((out / "manifest.json").read_text())["metrics"]["table3"]
+                row = next(r for r in t3 if r["planner"] == planner)
+                rows.append({"planner": planner, "variant": str(v.name),
+                             "overrides": " ".join(overrides) or "-",
+                             **{k: _finite(row.get(k)) for k in ROW_KEYS},
+                             **{k: val for k, val in row.items()
+                                if k.startswith(("fail_", "end_"))},
+                             "evaluate_version": out.name})
+    return rows
+
+
+def ablation(cfg: DictConfig, overrides: list[str] | None = None) -> Path:
+    """Run the ablation; returns its artifact folder. ``overrides``: passed to every run (the
+    command line's own, by default none)."""
+    ab = cfg.ablation
+    for planner in ab.planners:
+        if str(planner) not in PLANNERS:
+            raise ValueError(f"ablation.planners has {planner!r}: choose from "
+                             f"{', '.join(PLANNERS)}")
+    names = [str(v.name) for v in ab.variants]
+    if len(set(names)) != len(names):
+        raise ValueError(f"ablation.variants has repeated names: {names}; give each its own")
+    base = scale_overrides(cfg, overrides)
+    rows = run_variants(cfg, base)
+    upstream = {f"{r['planner']}/{r['variant']}": r["evaluate_version"] for r in rows}
+    config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
+    version = compute_version(STAGE, config, upstream)
+
+    def body(run: StageRun) -> None:
+        write_rows(run.work_dir / "ablation.csv", rows)
+        (run.work_dir / "ablation.json").write_text(json.dumps(rows, indent=1) + "\n")
+        run.metrics["ablation"] = rows
+        with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version) as log:
+            for i, row in enumerate(rows):
+                log.set_time(sequences={"variant": i}, clock_ns=i * 1_000_000_000)
+                if row["success_rate"] is not None:
+                    log.log_scalar(f"{row['planner']}/success_rate", float(row["success_rate"]))
+                log.log_text("log", "ablation: " + json.dumps(row))
+
+    return run_stage(data_root(cfg), STAGE, version, config, upstream, body,
+                     seed=int(cfg.seed), force=bool(ab.force))
+
+
+@hydra.main(config_path=CONF_DIR, config_name="ablation", version_base="1.3")
+def main(cfg: DictConfig) -> None:
+    stage_main(lambda c: ablation(c, own_overrides("ablation")))(cfg)
+
+
+if __name__ == "__main__":
+    main()

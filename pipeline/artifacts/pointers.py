@@ -1,0 +1,27 @@
+"""Keeping each stage's ``latest`` pointer where it was while a study runs extra variants.
+
+A study stage (robustness, ablation) runs other stages with its own overrides; each of those
+runs re-points its stage's ``latest``. The report reads ``latest`` by default, so the study
+puts the pointers back afterwards: ``latest`` keeps naming the ``make reproduce`` pipeline.
+"""
+
+from __future__ import annotations
+
+import os
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Iterable
+
+from pipeline.artifacts.store import LATEST, _point_latest
+
+
+@contextmanager
+def keep_latest(stage_dirs: Iterable[Path]):
+    """Restore the ``latest`` symlink of each of ``stage_dirs`` (where it existed) on exit."""
+    dirs = [Path(d) for d in stage_dirs]
+    before = {d: os.readlink(d / LATEST) for d in dirs if (d / LATEST).is_symlink()}
+    try:
+        yield
+    finally:
+        for d, target in before.items():
+            _point_latest(d, target)
