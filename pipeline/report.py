@@ -823,8 +823,8 @@ def failures_table(info: EvaluateInfo) -> Table:
 def table3_timing_table(info: EvaluateInfo) -> Table:
     """Measured wall-clock figures of the evaluation run (volatile)."""
     t = (info.manifest.get("timings") or {}).get("planners", {})
-    headers = ["planner", "planning time median (ms)", "PPH incl. planning",
-               "descriptor (ms/frame)", "control loop (Hz, wall)", "sim s per wall s",
+    headers = ["planner", "planning time median (ms; planner + run-time check)",
+               "PPH incl. planning", "descriptor (ms/frame)", "control loop (Hz, wall)", "sim s per wall s",
                "trial wall time (s)"]
     rows = [[PLANNER_LABELS.get(k, k), v.get("planning_ms_median"), v.get("pph_with_planning"),
              v.get("descriptor_ms_median"), v.get("control_loop_hz"), v.get("sim_s_per_wall_s"),

@@ -149,3 +149,52 @@ def test_distance_to_path_by_hand():
     pts = np.array([[0.5, 0.3, 0], [1.2, 0.5, 0], [-1, 0, 0], [2, 2, 0]], np.float64)
     assert distance_to_path(pts, path) == pytest.approx([0.3, 0.2, 1.0, math.sqrt(2)])
     assert distance_to_path(pts[:1], path[:1]) == pytest.approx([math.hypot(0.5, 0.3)])
+
+
+def test_a_servo_that_sweeps_a_wall_is_rejected(smoke_cfg):
+    """A 90 × 90 × 35 mm box standing on edge 2 cm from the bin's −x wall (a heap of the
+    evaluation, trial 1, reduced to that box): L on its 35 mm top face with the paper's axis
+    (hand X along world +x, the idle cup over the box) has a clear grasp pose, but the servo
+    from home brings the hand down past the wall top within the margin: "path_collision",
+    and with the bin taken away the same motion passes. Turned by 90° about the normal (the cup
+    line along the wall) the motion is clear."""
+    from pipeline.camera.geometry import project, world_to_camera
+    from pipeline.labelling.robot_check import check_grasp, robot_config
+    from pipeline.picking.cell import PickCell
+    from pipeline.picking.trial import PickRunner, paper_x_axis
+    from pipeline.robot.model import Robot
+    from pipeline.servo.descriptor import describe_surface
+
+    cfg = smoke_cfg("evaluate", "evaluate.boxes_per_trial=1",
+                    "eval_boxes.types=[{name: square, size: [0.09, 0.09, 0.035]}]")
+    cell = PickCell(cfg, lambda: Robot(robot_config(cfg)))
+    try:
+        runner = PickRunner(cfg, cell, None, "test")
+        cell.reset(np.random.default_rng(0), 1)
+        (body,) = list(cell.boxes)
+        p.resetBasePositionAndOrientation(
+            body, [-0.1784, -0.0202, 0.045], [-0.4764, 0.5225, 0.5225, -0.4764],
+            physicsClientId=cell.client)
+        cell.settle()
+        frame = cell.render()
+        top = np.asarray(cell.box_pose(body)[0]) + [0, 0, 0.045]
+        u, v = project(world_to_camera(top, frame.T_world_cam), cell.intrinsics)
+        feats, _ = describe_surface(frame.depth_m, cell.intrinsics, np.array([u, v]),
+                                    runner.descriptor_cfg)
+
+        def check(path_check, rotations, obstacles):
+            cfg.robot.path_check, cfg.hand.rotations_deg = path_check, rotations
+            bin_ids = [b for b in cell.cell_ids[1:] if b in obstacles]
+            return check_grasp(cell.robot, cfg, cfg.hand, frame.T_world_cam, feats.center_cam,
+                               feats.normal_cam, feats.long_axis_cam, feats.short_axis_cam,
+                               paper_x_axis(feats), "L", cell.intrinsics, obstacles, [body],
+                               bin_ids)
+
+        paper = check(False, [0], cell.obstacles)
+        assert paper.reason is None and paper.x_world[0] > 0.99  # the pose alone: clear
+        assert check(True, [0], cell.obstacles).reason == "path_collision"
+        assert check(True, [0], [body]).reason is None  # no bin: the same motion passes
+        turned = check(True, [0, 90], cell.obstacles)
+        assert turned.reason is None and abs(turned.x_world[1]) > 0.99
+    finally:
+        cell.close()

@@ -303,6 +303,19 @@ def test_deterministic(smoke_scenes):
             assert np.array_equal(getattr(s, name), getattr(t, name))
         assert (s.instance, s.long_length, s.short_length, s.num_points, s.area, s.extra) == \
             (t.instance, t.long_length, t.short_length, t.num_points, t.area, t.extra)
-    # Another seed may pick other hypotheses but lands on the same planes.
+    # Another seed picks other hypotheses but lands on the same planes: one each, on the same
+    # box, normals within 0.1°, centres within 1 mm. Which of two equal-sized faces of a box is
+    # found first, and the few points lying at the inlier threshold, depend on the hypothesis
+    # drawn (and on the rounding of the CPU's vectorised sums): an edge pixel between two faces
+    # may go to either. So neither the order within a box nor the exact counts are compared;
+    # the counts agree within 3 % (a 250-pixel face's edge is about 60 pixels).
     c = detect_surfaces(depth, mask, intr, SurfaceDetectionConfig(seed=5))
-    assert [s.num_points for s in c] == [s.num_points for s in a]
+    assert len(c) == len(a) and [s.instance for s in c] == [s.instance for s in a]
+    unmatched = set(range(len(c)))
+    for s in a:
+        same = [k for k in unmatched if c[k].instance == s.instance
+                and abs(float(s.normal_cam @ c[k].normal_cam)) > np.cos(np.radians(0.1))
+                and np.linalg.norm(s.center_cam - c[k].center_cam) < 0.001]
+        assert len(same) == 1, (s.instance, s.num_points)
+        assert abs(c[same[0]].num_points - s.num_points) <= 0.03 * s.num_points
+        unmatched.remove(same[0])
