@@ -889,7 +889,8 @@ ABLATION_MEANING = {
     "approach_direct": "the paper's servo straight from home to d*",
     "approach_pregrasp": "a pre-grasp on the surface normal instead of the lift",
     "retry_repeat": "no memory of failed plans",
-    "paper_descriptor": "the paper's descriptor (fixed window tolerance, seed as it is)",
+    "paper_descriptor": "the paper's descriptor (fixed window tolerance, seed as it is, no "
+                        "tracking of the surface's normal)",
     "paper_rotation": "the paper's axis rule only (no hand turned by 180° or 90°)",
     "all_off": "all of the above off: the paper's execution",
 }

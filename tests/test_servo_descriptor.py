@@ -311,3 +311,36 @@ def test_a_seed_on_a_one_pixel_crack_keeps_the_face_around_it():
     assert feats.normal_cam == pytest.approx([0, 0, -1], abs=1e-3)
     assert feats.center_px == pytest.approx([174.5, 199.5], abs=0.5)
     assert feats.area == pytest.approx(50 * 100 * (0.5 / 411.7) ** 2, rel=0.03)
+
+
+def test_a_tracked_seed_that_slid_onto_the_next_face_keeps_the_tracked_face():
+    """Level box A (x from −0.10 to 0 m, z = 0.5) and box B touching it along x = 0 and going
+    down at 45° (normal towards the camera (sin 45°, 0, −cos 45°)). A seed on B 7 px past the
+    crease gives B. Tracking A (its normal, −Z, expected, ``track_normal_deg`` = 20): the window
+    plane is A's orientation through the largest slab of window points (A's own plane), and
+    the region is all of A, its normal A's. A surface found too far from the expected normal is
+    "surface_changed", not a new target."""
+    c45 = s45 = np.sqrt(0.5)
+    box_b = rect([0.05 * c45, 0.0, 0.5 + 0.05 * s45], [c45, 0, s45], [0, 1, 0], 0.05, 0.05)
+    depth, hits = render([BOX_A, box_b])
+    seed = (215, 200)
+    f, _ = describe_surface(depth, SR300, seed)
+    # B, and of A at most the rim's two columns (as at the 20° crease above)
+    assert angle_deg(f.normal_cam, [s45, 0, -c45]) < 0.5 and f.region[hits[0]].sum() <= 2 * 82
+    cfg = DescriptorConfig(track_normal_deg=20.0)
+    f, reason = describe_surface(depth, SR300, seed, cfg, expected_normal_cam=[0, 0, -1])
+    assert reason == "" and angle_deg(f.normal_cam, [0, 0, 1]) < 0.5
+    assert np.all(f.region[hits[0]])
+    # A normal expected 12° off A's (within Eq. 13's ε2 = 0.05, about 12.8°): A's region still
+    # grows from that orientation, but its refitted normal is 12° from the expected one, more
+    # than a tracking tolerance of 10°: "surface_changed". 50° off: nothing grows at all.
+    t = np.radians(12)
+    off = np.array([np.sin(t), 0.0, -np.cos(t)])
+    assert describe_surface(depth, SR300, seed, DescriptorConfig(track_normal_deg=10.0),
+                            expected_normal_cam=off) == (None, "surface_changed")
+    t = np.radians(50)
+    assert describe_surface(depth, SR300, seed, cfg, expected_normal_cam=[
+        0, np.sin(t), -np.cos(t)]) == (None, "no_region_at_seed")
+    # tracking off (the paper): the expected normal is ignored
+    f, _ = describe_surface(depth, SR300, seed, DescriptorConfig(), expected_normal_cam=[0, 0, -1])
+    assert angle_deg(f.normal_cam, [s45, 0, -c45]) < 0.5

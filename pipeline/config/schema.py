@@ -343,6 +343,7 @@ class ServoSchema:
     window: int = 21
     window_tolerance_depth: float = 0.0  # m; > 0: window RANSAC tolerance ε1·min(1, Z/this)
     seed_repair: bool = True  # crack and small-component repairs of the seed
+    track_normal_deg: float = 20.0  # servo: stay on the surface of the previous frame's normal
     eps_distance: float = 0.004
     eps_normal: float = 0.05
     min_pixels: int = 50

@@ -173,6 +173,7 @@ class PickRunner:
                                                window_tolerance_depth=float(
                                                    s.window_tolerance_depth),
                                                seed_repair=bool(s.seed_repair),
+                                               track_normal_deg=float(s.track_normal_deg),
                                                eps_distance=float(s.eps_distance),
                                                eps_normal=float(s.eps_normal),
                                                min_pixels=int(s.min_pixels),
@@ -450,6 +451,7 @@ class PickRunner:
         predicted = self.predicted_path if x_world is not None else None
         executed = [robot.camera_pose()[:3, 3]]
         seed = np.array([cand.u, cand.v], np.float64)
+        normal_world = None  # the tracked surface's normal (world), from the previous frame
         limit_hits = 0
         steps_max = int(math.ceil(float(cfg.servo.timeout_s) / self.dt))
         converged = False
@@ -459,7 +461,10 @@ class PickRunner:
             if step > 0:
                 frame = self._render()
             td = time.perf_counter()
-            feats, reason = describe_surface(frame.depth_m, intr, seed, self.descriptor_cfg)
+            # the tracked surface's normal, carried into this frame by the camera's motion
+            expected = None if normal_world is None else frame.T_world_cam[:3, :3].T @ normal_world
+            feats, reason = describe_surface(frame.depth_m, intr, seed, self.descriptor_cfg,
+                                             expected_normal_cam=expected)
             self.timings["descriptor_s"].append(time.perf_counter() - td)
             if feats is None:
                 att.outcome, att.lost_reason = "lost_target", str(reason)
@@ -477,6 +482,7 @@ class PickRunner:
                 seed = None  # g′ of this frame, carried to the next (below)
             g_world = frame.T_world_cam[:3, :3] @ np.asarray(feats.center_cam) + \
                 frame.T_world_cam[:3, 3]
+            normal_world = frame.T_world_cam[:3, :3] @ np.asarray(feats.normal_cam)
             tc = time.perf_counter()
             ref = None if x_world is None else T_cam_world[:3, :3] @ x_world
             if step == 0:

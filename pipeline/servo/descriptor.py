@@ -111,7 +111,7 @@ from pipeline.labelling.surfaces import _fit_plane, _region_surface
 MIN_WINDOW_POINTS = 10
 # The reasons ``describe_surface`` gives for finding no surface (see its docstring).
 NO_SURFACE_REASONS = ("seed_outside_image", "no_depth_at_seed", "too_few_window_points",
-                      "no_region_at_seed", "region_too_small", "edge_on")
+                      "no_region_at_seed", "region_too_small", "edge_on", "surface_changed")
 
 
 @dataclass
@@ -146,6 +146,10 @@ class DescriptorConfig:
             ε1 from it (a crack), and the nearest component of at least ``min_pixels`` when the
             seed's own is smaller (False: the seed's depth and component as they are, the
             nearest rule pixel only when the seed fails the rules).
+        track_normal_deg: with an expected normal (``describe_surface(expected_normal_cam=)``,
+            the tracked surface's normal carried from the previous frame), only window planes
+            within this angle of it are candidates, and a surface found farther from it is
+            "surface_changed" (0 = off, the paper: the plane at the seed, whatever it is).
     """
 
     window: int = 21
@@ -160,6 +164,7 @@ class DescriptorConfig:
     refine: bool = True
     window_tolerance_depth: float = 0.0  # m; > 0: window RANSAC tolerance ε1·min(1, Z/this)
     seed_repair: bool = True
+    track_normal_deg: float = 0.0  # > 0: stay on the surface whose normal is expected
 
 
 @dataclass
@@ -267,8 +272,8 @@ def _rules(X: np.ndarray, Y: np.ndarray, Z: np.ndarray, valid: np.ndarray, xn: n
     return on_plane, rules
 
 
-def _window_plane(win: np.ndarray, seed_point: np.ndarray,
-                  cfg: DescriptorConfig) -> tuple[np.ndarray, float]:
+def _window_plane(win: np.ndarray, seed_point: np.ndarray, cfg: DescriptorConfig,
+                  expected: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """Eq. 11: the plane (n̂ towards the camera, c = n̂ · P) of the (N, 3) window points, N ≥ 10.
 
     With ``cfg.window_hypotheses`` > 0 the points are first restricted to the seed's surface
@@ -277,8 +282,11 @@ def _window_plane(win: np.ndarray, seed_point: np.ndarray,
     point (within ε1), or among all if none does (the seed is an outlier, e.g. a depth spike),
     the one with most points is kept, and its points are fitted. Then ``cfg.window_refits``
     least-squares refits on the points within ε1. With ``cfg.window_tolerance_depth`` the
-    hypotheses' tolerance shrinks with the seed's depth (see ``DescriptorConfig``).
+    hypotheses' tolerance shrinks with the seed's depth (see ``DescriptorConfig``). With an
+    ``expected`` unit normal (3,) and ``cfg.track_normal_deg``: :func:`_tracked_plane`.
     """
+    if expected is not None and cfg.track_normal_deg > 0:
+        return _tracked_plane(win, seed_point, cfg, expected)
     used = np.ones(len(win), dtype=bool)
     if cfg.window_hypotheses > 0:
         rng = np.random.default_rng(0)
@@ -313,8 +321,30 @@ def _window_plane(win: np.ndarray, seed_point: np.ndarray,
     return n_hat, c_hat
 
 
+def _tracked_plane(win: np.ndarray, seed_point: np.ndarray, cfg: DescriptorConfig,
+                   expected: np.ndarray) -> tuple[np.ndarray, float]:
+    """The window plane while tracking a surface of known normal ``expected`` (3,, unit): the
+    plane of that normal through the window point that most window points lie within the
+    hypotheses' tolerance of (the largest slab of the tracked orientation), its offset the mean
+    of those points'. A seed carried to the next frame can sit on the edge or the next face of
+    a box; the window's own best plane is then one across both faces, and the region grown
+    from it is the wrong face or nothing. The region found from this plane is refitted
+    (``cfg.refine``), so the surface's normal is measured afresh in every frame."""
+    n = np.asarray(expected, np.float64)
+    n = n if n @ seed_point < 0 else -n  # towards the camera, as _fit_plane's
+    tol = cfg.eps_distance
+    if cfg.window_tolerance_depth > 0:
+        tol *= min(1.0, float(seed_point[2]) / cfg.window_tolerance_depth)
+    d = win @ n
+    counts = (np.abs(d[None, :] - d[:, None]) < tol).sum(axis=1)  # (N,) per candidate offset
+    used = np.abs(d - d[int(np.argmax(counts))]) < tol
+    return n, float(d[used].mean())
+
+
 def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
-                     cfg: DescriptorConfig | None = None) -> tuple[SurfaceFeatures | None, str]:
+                     cfg: DescriptorConfig | None = None,
+                     expected_normal_cam: np.ndarray | None = None
+                     ) -> tuple[SurfaceFeatures | None, str]:
     """Surface features of the planar surface at ``seed_uv`` (paper Sec. 5.1; see the module
     docstring for the algorithm).
 
@@ -324,13 +354,17 @@ def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
         intrinsics: of ``depth_m`` (its size must match).
         seed_uv: (2,) seed pixel g = (u, v), rounded to the nearest pixel.
         cfg: settings; defaults to ``DescriptorConfig()``.
+        expected_normal_cam: (3,) optional, the normal the surface should have in this camera
+            frame (the tracked surface's, moved by the camera's motion); used with
+            ``cfg.track_normal_deg``.
 
     Returns:
         (features, "") when a surface is found, else (None, reason) with reason one of
         ``NO_SURFACE_REASONS``: ``"seed_outside_image"`` (also a NaN/inf seed),
         ``"no_depth_at_seed"`` (also an image with no data at all), ``"too_few_window_points"``,
         ``"no_region_at_seed"``, ``"region_too_small"``, ``"edge_on"`` (a region pixel's ray
-        misses the plane).
+        misses the plane), ``"surface_changed"`` (its normal is more than
+        ``cfg.track_normal_deg`` from ``expected_normal_cam``).
 
     Raises:
         ValueError: a depth image of the wrong shape (not the intrinsics' (H, W)), ndim or
@@ -387,7 +421,11 @@ def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
     if cfg.seed_repair and abs(z_seed - z_around) > cfg.eps_distance:
         z_seed = z_around
     seed_point = z_seed * np.array([xn[u], yn[v], 1.0], dtype=np.float64)
-    n_hat, c_hat = _window_plane(win, seed_point, cfg)
+    expected = None
+    if expected_normal_cam is not None and cfg.track_normal_deg > 0:
+        expected = np.asarray(expected_normal_cam, np.float64)
+        expected = expected / np.linalg.norm(expected)
+    n_hat, c_hat = _window_plane(win, seed_point, cfg, expected)
     d_hat = -c_hat  # n̂ · P + D̂ = 0 with n̂ towards the camera
 
     # (2)–(3) Eqs. 12–14, on the crop that can hold the region: the region is one connected
@@ -475,6 +513,9 @@ def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
                               n, float(c), e1, e2, intrinsics, {})
     if surface is None:
         return None, "edge_on"
+    if expected is not None and abs(float(np.asarray(surface.normal_cam) @ expected)) < np.cos(
+            np.radians(cfg.track_normal_deg)):
+        return None, "surface_changed"
 
     # (7) Warped perspective.
     _, w_long, w_short = warped_axes(surface)
