@@ -12,10 +12,10 @@ this stage gathers their Table 3 rows:
                     PPH (motion), failure counts, trial ends, the evaluation's version
     ablation.json   the same rows
 
-The oracle planner (the labels computed on the home image) is the default: its labels and its
-run-time check follow the same switches, so each row isolates what the extension does to
-execution. For the DCNN the network is the one trained on the default labels; a variant changes
-only its run-time execution. The evaluation stage's ``latest`` is put back afterwards, so that it
+The oracle planner (the labels computed on the home image) and the DCNN are the default. The
+oracle's labels and run-time check follow the same switches, so its rows isolate what an
+extension does to execution. For the DCNN the network is the one trained on the default labels;
+a variant changes only its run-time execution. The evaluation stage's ``latest`` is put back afterwards, so that it
 still names the ``make reproduce`` evaluation.
 """
 

@@ -932,9 +932,10 @@ def render_ablation(ablation, tables: dict[str, Table]) -> list[str]:
     out += [
         f"Ablation artifact `{folder.name}` (`python -m pipeline.ablation`): each extension "
         "of the closed loop turned off on its own, then all at once, on the same heaps as "
-        "Table 3 (one evaluation artifact per row, named in the CSV). With the oracle planner "
-        "the labels and the run-time check follow the same switches, so a row shows what the "
-        "extension does to execution alone. Boxes per planner and variant: "
+        "Table 3 (one evaluation artifact per row, named in the CSV). For the oracle the labels "
+        "and the run-time check follow the same switches, so its rows show what the extension "
+        "does to execution alone; the DCNN keeps the network trained on the default labels, "
+        "and a variant changes its execution only. Boxes per planner and variant: "
         f"{', '.join(str(t) for t in trials)}.",
         "",
         tables["ablation"].markdown(),

@@ -37,7 +37,7 @@ def test_smoke_ablation_end_to_end(tmp_path):
 
     base = ["experiment=smoke", f"paths.root={tmp_path}", "logging.progress=false"]
     first = evaluate(compose("evaluate", base + ["planner=oracle"]))  # as make reproduce leaves it
-    cfg = _cfg(tmp_path)
+    cfg = _cfg(tmp_path, "ablation.planners=[oracle]")  # the DCNN needs a trained network
     cfg.ablation.variants = [cfg.ablation.variants[0], cfg.ablation.variants[2]]
     out = ablation(cfg, base)
     latest = tmp_path / "data" / "evaluate" / "latest"

@@ -424,7 +424,7 @@ class AblationVariant:
 class AblationConfig:
     """The execution ablation (``pipeline.ablation``): each variant an evaluation artifact."""
 
-    planners: List[str] = field(default_factory=lambda: ["oracle"])
+    planners: List[str] = field(default_factory=lambda: ["oracle", "dcnn"])
     trials: int = 10
     variants: List[AblationVariant] = field(default_factory=list)
     force: bool = False
