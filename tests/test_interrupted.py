@@ -74,8 +74,11 @@ def _kill_when(stage: str, root: Path, ready: Callable[[], bool], timeout: float
     before."""
     log = root / f"{stage}-killed.log"
     with open(log, "a") as out:
+        # SIGINT at its default in the stage, whatever this process inherited: a shell starts a
+        # background job with SIGINT ignored, and Python then never raises KeyboardInterrupt
         proc = subprocess.Popen(_cmd(stage, root, workers), cwd=REPO_ROOT, env=_env(),
-                                stdout=out, stderr=subprocess.STDOUT)
+                                stdout=out, stderr=subprocess.STDOUT,
+                                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         deadline = time.monotonic() + timeout
         while not ready():
