@@ -32,15 +32,18 @@ def test_substeps_by_hand():
 
 
 class _CountingRobot:
-    """Records the joints of every collision query; ``hit`` says which of them touch."""
+    """Records the joints of every collision query (``q`` None: where the robot is, as
+    ``Robot.in_collision``); ``hit`` says which of them touch."""
 
     def __init__(self, hit):
         self.cfg = SimpleNamespace(collision_margin=0.005)
-        self.hit, self.checked = hit, []
+        self.hit, self.checked, self.q = hit, [], None
 
     def in_collision(self, q, obstacles, ignore, margin=None, self_collision=True):
-        self.checked.append((np.round(q, 9).tolist(), margin))
-        return ["hit"] if self.hit(q) else []
+        if q is not None:
+            self.q = np.asarray(q)
+        self.checked.append((np.round(self.q, 9).tolist(), margin))
+        return ["hit"] if self.hit(self.q) else []
 
 
 def test_every_substep_is_checked_by_hand():
@@ -62,6 +65,7 @@ def test_every_substep_is_checked_by_hand():
     check_motion(robot, q[:2], poses[:2], PathCheckConfig(bin_clearance=0.002),
                  obstacle_ids=[1, 2], padded_ids=[2])
     assert [c[1] for c in robot.checked[:2]] == [None, pytest.approx(0.007)]
+    assert robot.checked[0][0] == robot.checked[1][0]  # both at the first part's joints
 
 
 def _level_face_below_home():

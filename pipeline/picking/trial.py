@@ -188,7 +188,6 @@ class PickRunner:
         self.gripper_factory = lambda: SuctionGripper(cell.client, cell.robot, self.suction_cfg,
                                                       float(cfg.hand.cup_offset))
         self._place_q: np.ndarray | None = None
-        self.predicted_path: list | None = None  # of the last grasp the run-time check passed
         # wall time of the parts of a control step (seconds, one entry per call)
         self.timings: dict[str, list[float]] = {
             "descriptor_s": [], "control_step_s": [], "render_s": [], "control_law_s": [],
@@ -271,7 +270,8 @@ class PickRunner:
 
     def select(self, frame: Frame, cands: list, failed: list[dict]):
         """The grasp to execute: ``(candidate, pattern, hand X axis in the world or None for the
-        paper's rule)`` of the best-ranked candidate, among the
+        paper's rule, the check's predicted camera poses or None)`` of the best-ranked
+        candidate, among the
         first ``evaluate.max_candidates_checked``, that is not a repeat of a failed attempt
         (``_repeats_failure``) and, with ``evaluate.check_reachability``, passes the robot-level
         check with that pattern; None when no candidate does (the trial ends with "no grasp").
@@ -284,10 +284,10 @@ class PickRunner:
                 if self._repeats_failure(target, pattern, point, failed):
                     continue
                 if not gate:
-                    return cand, pattern, None
-                x_world = self._reachable(frame, cand, pattern, target)
-                if x_world is not None:
-                    return cand, pattern, x_world
+                    return cand, pattern, None, None
+                check = self._reachable(frame, cand, pattern, target)
+                if check is not None:
+                    return cand, pattern, check.x_world, check.path
         return None
 
     def _repeats_failure(self, target: int, pattern: str, point: np.ndarray | None,
@@ -312,15 +312,16 @@ class PickRunner:
                 return True
         return False
 
-    def _reachable(self, frame: Frame, cand, pattern: str, target: int) -> np.ndarray | None:
+    def _reachable(self, frame: Frame, cand, pattern: str, target: int):
         """The robot-level check of the labelling stage for a grasp at the candidate
         (``pipeline.labelling.robot_check.check_grasp``: the grasp pose and, with
         ``robot.path_check``, the servo's predicted motion from home to it): the descriptor must
         find the surface at the point (a failure is a rejection); camera X along the surface
         axis nearer the image X, turned about the normal by the first of ``hand.rotations_deg``
-        that works. Keeps the predicted camera poses in ``predicted_path``.
+        that works.
 
-        Returns the hand's X axis (3,) in the world frame of the pose that passed, or None."""
+        Returns the passing ``GraspCheck`` (the hand's X axis in the world, the predicted camera
+        poses), or None when the check rejects the candidate."""
         from pipeline.labelling.robot_check import check_grasp
         from pipeline.servo.descriptor import describe_surface
 
@@ -337,8 +338,7 @@ class PickRunner:
                             paper_x_axis(feats), pattern, self.cell.intrinsics,
                             self.cell.obstacles, [target] if target >= 0 else [],
                             self.cell.cell_ids[1:])
-        self.predicted_path = check.path
-        return check.x_world
+        return check if check.reason is None else None
 
     def _first_goal(self, centre_cam: np.ndarray, feats, ref_cam, pattern: str,
                     T_world_cam: np.ndarray):
@@ -426,9 +426,11 @@ class PickRunner:
 
     def attempt(self, frame: Frame, cand, planning_s: float, trial: int, index: int,
                 trace: list | None, pattern: str | None = None,
-                x_world: np.ndarray | None = None) -> Attempt:
+                x_world: np.ndarray | None = None, predicted: list | None = None) -> Attempt:
         """One attempt at ``cand`` with ``pattern`` (default: its first in ``_patterns``);
-        ``x_world``: where the hand's X should point (world frame; None: the paper's rule)."""
+        ``x_world``: where the hand's X should point (world frame; None: the paper's rule);
+        ``predicted``: the run-time check's camera poses of this servo, from which the
+        attempt's ``path_deviation_m`` is measured (None: not recorded)."""
         from pipeline.servo.control import servo_velocity
         from pipeline.servo.descriptor import describe_surface
 
@@ -448,7 +450,6 @@ class PickRunner:
             fixed_point_world = T[:3, :3] @ fixed + T[:3, 3]
 
         q = robot.joints()
-        predicted = self.predicted_path if x_world is not None else None
         executed = [robot.camera_pose()[:3, 3]]
         seed = np.array([cand.u, cand.v], np.float64)
         normal_world = None  # the tracked surface's normal (world), from the previous frame
@@ -514,12 +515,13 @@ class PickRunner:
             if step == steps_max:
                 break
             q, clamped = self._move_twist(q, np.asarray(cmd.velocity, np.float64))
-            executed.append(robot.camera_pose()[:3, 3])
+            T_moved = robot.camera_pose()
+            executed.append(T_moved[:3, 3])
             if fixed_point_world is None:
                 # The next seed is this g′, moved into the next image by the camera's own motion
                 # (forward kinematics): the paper seeds with the previous g′; at 30 Hz and up to
                 # 0.5 m/s the image moves tens of pixels between frames.
-                seed = _project(robot.camera_pose(), g_world, intr, feats.center_px)
+                seed = _project(T_moved, g_world, intr, feats.center_px)
             att.servo_steps += 1
             att.servo_s += self.dt
             self.timings["control_step_s"].append(time.perf_counter() - t0)
@@ -634,10 +636,11 @@ class PickRunner:
             if chosen is None:
                 end = "no_grasp"
                 break
-            cand, pattern, x_world = chosen
+            cand, pattern, x_world, predicted = chosen
             target, point = self._target_of(frame, cand)
             pose = self.cell.box_pose(target) if target >= 0 else (np.zeros(3), np.zeros(4))
-            att = self.attempt(frame, cand, planning_s, trial, index, trace, pattern, x_world)
+            att = self.attempt(frame, cand, planning_s, trial, index, trace, pattern, x_world,
+                               predicted)
             attempts.append(att)
             if att.outcome != "success":
                 if point is not None:

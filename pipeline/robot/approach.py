@@ -1,4 +1,4 @@
-"""How the robot approaches a grasp pose: its first servo goal and the poses it passes through.
+"""How the robot approaches a grasp pose: the servo's first goal before the grasp pose.
 
 The closed loop servos from home to a first goal, then on to the grasp pose (the camera at d*
 from the surface, ``target_pose.target_camera_pose``); the labelling stage and the run-time

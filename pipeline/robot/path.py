@@ -72,7 +72,7 @@ def check_motion(robot, q: np.ndarray, poses: Sequence[np.ndarray], cfg: PathChe
     ``cfg.bin_clearance``) and of itself. The start ``q[0]`` is not checked (the robot is
     there already). The robot is left at the last joints checked."""
     q = np.asarray(q, np.float64)
-    padded = set(padded_ids)
+    padded = list(dict.fromkeys(padded_ids))
     plain = [o for o in obstacle_ids if o not in padded]
     margin = robot.cfg.collision_margin + cfg.bin_clearance
     count = 0
@@ -82,8 +82,8 @@ def check_motion(robot, q: np.ndarray, poses: Sequence[np.ndarray], cfg: PathChe
             qk = q[i] + (k / n) * (q[i + 1] - q[i])
             count += 1
             hits = robot.in_collision(qk, plain, ignore_body_ids)
-            if padded and not hits:
-                hits = robot.in_collision(qk, list(padded), ignore_body_ids, margin=margin,
+            if padded and not hits:  # the robot is at qk already
+                hits = robot.in_collision(None, padded, ignore_body_ids, margin=margin,
                                           self_collision=False)
             if hits:
                 return PathResult(False, "collision", i, count, list(hits))
