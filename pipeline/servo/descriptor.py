@@ -147,9 +147,10 @@ class DescriptorConfig:
             seed's own is smaller (False: the seed's depth and component as they are, the
             nearest rule pixel only when the seed fails the rules).
         track_normal_deg: with an expected normal (``describe_surface(expected_normal_cam=)``,
-            the tracked surface's normal carried from the previous frame), only window planes
-            within this angle of it are candidates, and a surface found farther from it is
-            "surface_changed" (0 = off, the paper: the plane at the seed, whatever it is).
+            the tracked surface's normal carried from the previous frame), the window plane
+            takes that orientation (``_tracked_plane``), and a surface found farther than this
+            angle from it is "surface_changed" (0 = off, the paper: the plane at the seed,
+            whatever it is).
     """
 
     window: int = 21
@@ -300,9 +301,7 @@ def _window_plane(win: np.ndarray, seed_point: np.ndarray, cfg: DescriptorConfig
         if ok.any():
             n, p0 = n[ok] / length[ok, None], p0[ok]
             offset = np.einsum("ki,ki->k", n, p0)
-            tol = cfg.eps_distance
-            if cfg.window_tolerance_depth > 0:
-                tol *= min(1.0, float(seed_point[2]) / cfg.window_tolerance_depth)
+            tol = _hypothesis_tolerance(seed_point, cfg)
             inliers = np.abs(win @ n.T - offset) < tol  # (N, K)
             counts = inliers.sum(axis=0)
             holds_seed = np.abs(n @ seed_point - offset) < tol
@@ -321,6 +320,15 @@ def _window_plane(win: np.ndarray, seed_point: np.ndarray, cfg: DescriptorConfig
     return n_hat, c_hat
 
 
+def _hypothesis_tolerance(seed_point: np.ndarray, cfg: DescriptorConfig) -> float:
+    """The window planes' inlier tolerance: ε1, times min(1, Z_seed / window_tolerance_depth)
+    when that is set (metres)."""
+    tol = cfg.eps_distance
+    if cfg.window_tolerance_depth > 0:
+        tol *= min(1.0, float(seed_point[2]) / cfg.window_tolerance_depth)
+    return tol
+
+
 def _tracked_plane(win: np.ndarray, seed_point: np.ndarray, cfg: DescriptorConfig,
                    expected: np.ndarray) -> tuple[np.ndarray, float]:
     """The window plane while tracking a surface of known normal ``expected`` (3,, unit): the
@@ -332,9 +340,7 @@ def _tracked_plane(win: np.ndarray, seed_point: np.ndarray, cfg: DescriptorConfi
     (``cfg.refine``), so the surface's normal is measured afresh in every frame."""
     n = np.asarray(expected, np.float64)
     n = n if n @ seed_point < 0 else -n  # towards the camera, as _fit_plane's
-    tol = cfg.eps_distance
-    if cfg.window_tolerance_depth > 0:
-        tol *= min(1.0, float(seed_point[2]) / cfg.window_tolerance_depth)
+    tol = _hypothesis_tolerance(seed_point, cfg)
     d = win @ n
     counts = (np.abs(d[None, :] - d[:, None]) < tol).sum(axis=1)  # (N,) per candidate offset
     used = np.abs(d - d[int(np.argmax(counts))]) < tol
