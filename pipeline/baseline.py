@@ -357,6 +357,8 @@ def table2_rows(result: dict, radius_px: float, radii: np.ndarray) -> tuple[list
                      "images": int(scored.sum()),
                      "no_grasp": int(np.sum(np.isinf(d))),
                      f"within_{radius_px:g}px": round(within_rate(d, radius_px), 6),
+                     f"within_{radius_px:g}px_inclusive": round(
+                         within_rate(d, radius_px, inclusive=True), 6),
                      "median_distance_px": round(float(np.median(finite)), 3) if len(finite)
                      else float("nan")})
     for k, r in enumerate(radii):

@@ -329,7 +329,7 @@ def planning_times(cfg, num_images: int = 8, repeats: int = 3) -> dict[str, floa
             planner, label = Planner.load(trained.parent), "trained"
         else:
             net = GraspNet(NetworkConfig(width=full.model.width))
-            rk = ranking_config(full)
+            rk = ranking_config(full, min(full.train.threshold_grid))
             planner = Planner(net, Normalisation(rk.d_ground, 0.1, 0.5), rk)
             label = "untrained"
         planner.plan(scenes[0].depth_m, intr)  # warm-up
@@ -436,9 +436,11 @@ def training_memory(experiment: str = "paper", root: str | None = None, steps: i
     return json.loads(line[len("RESULT "):])
 
 
-def training_images_per_s(width: float, batch: int = 16, steps: int = 4) -> float:
+def training_images_per_s(width: float, batch: int = 16, steps: int = 4,
+                          channels_last: bool = False) -> float:
     """Training throughput (forward + focal loss + backward + Adam step), CPU, 2 threads, on
-    random depth-like inputs with 10 random grasp points per image."""
+    random depth-like inputs with 10 random grasp points per image, in the contiguous or the
+    channels-last memory layout (``train.channels_last``)."""
     import torch
 
     from pipeline.planner.loss import grasp_loss
@@ -448,9 +450,10 @@ def training_images_per_s(width: float, batch: int = 16, steps: int = 4) -> floa
     torch.set_num_threads(2)
     torch.manual_seed(0)
     rng = np.random.default_rng(0)
-    net = GraspNet(NetworkConfig(width=width)).train()
+    layout = torch.channels_last if channels_last else torch.contiguous_format
+    net = GraspNet(NetworkConfig(width=width)).train().to(memory_format=layout)
     opt = torch.optim.Adam(net.parameters(), lr=1e-4)
-    x = torch.randn(batch, 1, 416, 416)
+    x = torch.randn(batch, 1, 416, 416).to(memory_format=layout)
     targets = stack_targets([encode(rng.uniform(0, 415, (10, 2)), rng.integers(0, 4, 10))
                              for _ in range(batch)])
     times = []
@@ -765,8 +768,13 @@ def main(argv: list[str] | None = None) -> int:
     results.update(planning_times(cfg))
     width = float(compose("train", ["experiment=default"]).model.width)
     results["train_default_images_per_s"] = training_images_per_s(width)
+    results["train_default_channels_last_images_per_s"] = training_images_per_s(
+        width, channels_last=True)
     print(f"training, default network (width {width}), batch 16: "
-          f"{results['train_default_images_per_s']:.1f} images/s")
+          f"{results['train_default_images_per_s']:.1f} images/s contiguous, "
+          f"{results['train_default_channels_last_images_per_s']:.1f} images/s channels_last "
+          f"({results['train_default_channels_last_images_per_s'] / "
+          f"results['train_default_images_per_s']:.2f}x, same run)")
     results["label_vs_generate_1w"] = results["label_1w_scenes_per_s"] / one
     print(f"labelling / generation, per process:    {results['label_vs_generate_1w']:.2f} "
           "(target >= 1: labelling is not the bottleneck)")

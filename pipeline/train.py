@@ -5,9 +5,12 @@
 Upstream: the label artifact (``train.label_version``, default latest) and the generation
 artifact it names. Output: ``models/train/<version>/`` with
 
-* ``model.pt``: final weights, network config, depth normalisation and ranking config (th,
-  D_ground): what ``pipeline.planner.Planner.load`` reads; ``torch.load(weights_only=True)``.
+* ``model.pt``: the weights of the epoch with the lowest validation loss, network config, depth
+  normalisation and ranking config (th, D_ground): what ``pipeline.planner.Planner.load``
+  reads; ``torch.load(weights_only=True)``.
 * ``checkpoint.pt``: the last checkpoint (weights, Adam state, config, epoch, history).
+* ``threshold_curve.csv``: th of Eq. 3 against the validation split's figures, from which th is
+  chosen (``pipeline.planner.calibration``) unless ``train.threshold`` fixes it.
 * ``pr_curve.csv``: the precision–recall curve on the test split (``planner.evaluate``).
 * ``log.rrd`` / ``log.mcap``: loss per step (``step`` timeline) and per epoch (``epoch``
   timeline), validation loss, Table 1, and sample test predictions on their depth images.
@@ -15,7 +18,9 @@ artifact it names. Output: ``models/train/<version>/`` with
   train/val loss per epoch, Table 1, a downsampled PR curve, training images/s.
 
 Optimiser (Sec. 6): Adam, lr 1e-4, betas (0.9, 0.999), batch 16; loss (Eqs. 4–6): λ = 1,
-α = 0.25, γ = 2. Depth normalisation: ``pipeline.planner.data``. Augmentation: none by default
+α = 0.25, γ = 2. Stopping: ``train.epochs`` is a budget; training stops once ``train.patience``
+epochs pass without a lower validation loss, and the model is the epoch with the lowest one
+(its weights kept in the resume folder's ``best.pt``). Depth normalisation: ``pipeline.planner.data``. Augmentation: none by default
 (``train.augment_flip``, see ``pipeline.planner.augment``).
 
 Determinism: weights are initialised from ``torch.manual_seed(seed)``; the data order and flips
@@ -61,12 +66,14 @@ from omegaconf import DictConfig, OmegaConf
 from tqdm import tqdm
 
 from pipeline.artifacts import compute_version, load_manifest, resolve_artifact, run_stage, stage_config
+from pipeline.artifacts.csvfile import write_rows
 from pipeline.artifacts.store import ArtifactError, StageRun
 from pipeline.camera.geometry import backproject
 from pipeline.cli import CONF_DIR, data_root, stage_main
 from pipeline.label import CLASS_COLORS, LabelSet
 from pipeline.labelling.types import GraspClass
 from pipeline.planner.augment import FLIPS
+from pipeline.planner.calibration import RankedImage, choose_threshold, threshold_curve
 from pipeline.planner import distributed
 from pipeline.planner.data import GraspDataset, Normalisation, make_loader
 from pipeline.planner.distributed import DistContext
@@ -82,6 +89,7 @@ SECTIONS = ("seed", "model", "train", "camera", "bin", "hand")
 NOT_AFFECTING_RESULT = ("train.label_version", "train.force", "train.device", "train.log_samples",
                         "train.loader_workers")
 CHECKPOINT = "checkpoint.pt"
+BEST = "best.pt"  # in the resume folder: the weights of the epoch with the lowest val loss
 RESUME_PREFIX = ".resume-"
 EVAL_BATCH = 16
 
@@ -157,7 +165,7 @@ def evaluate_loss(net, data: GraspDataset, loss_cfg: LossConfig, device) -> floa
 
 @torch.no_grad()
 def table1(planner: Planner, data: GraspDataset, radius_px: float, depth_of=None) -> dict:
-    """Table 1 on a split: every cell a prediction (``planner.evaluate``).
+    """Table 1 on a split at the planner's th (``planner.evaluate``; the old definitions too).
 
     ``depth_of(i)``: the (H, W) depth image, metres, the network sees for image i (default:
     ``data.depth_m``, the generation artifact's ``depth``); the ground truth is ``data.rows``.
@@ -175,7 +183,24 @@ def table1(planner: Planner, data: GraspDataset, radius_px: float, depth_of=None
                 classes=np.array([int(p.grasp_class) for p in preds], np.int64),
                 scores=np.array([p.probability for p in preds], np.float64),
                 gt_uv=rows["uv"], gt_classes=rows["grasp_class"]))
-    return precision_table(images, radius_px)
+    return precision_table(images, radius_px, threshold=planner.ranking.threshold)
+
+
+@torch.no_grad()
+def ranked_images(planner: Planner, data: GraspDataset, progress: bool = False) -> list[RankedImage]:
+    """Every image of a split planned at the planner's th: its candidates in Eq. 7's order and
+    its label points (``pipeline.planner.calibration``)."""
+    out = []
+    for i in tqdm(range(len(data)), desc="train: calibrating th on val", unit="image",
+                  disable=not progress):
+        cands = planner.plan(data.depth_m(i), data.intrinsics)
+        rows = data.rows[i]
+        out.append(RankedImage(
+            uv=np.array([[c.u, c.v] for c in cands], np.float64).reshape(-1, 2),
+            classes=np.array([int(c.grasp_class) for c in cands], np.int64),
+            probabilities=np.array([c.probability for c in cands], np.float64),
+            gt_uv=rows["uv"], gt_classes=rows["grasp_class"]))
+    return out
 
 
 def _log_history(log: StageLog, history: dict, steps_per_epoch: int) -> None:
@@ -232,6 +257,20 @@ def _epoch_batches(n: int, batch: int, seed: int, epoch: int, flip: str,
         batches.append(list(zip(idx, fl)))
         weights.append(w)
     return batches, weights
+
+
+def best_epoch(val_loss: list[float]) -> int | None:
+    """1-based epoch of the lowest validation loss (the first of equal ones); None when there is
+    none (no validation images: every loss is NaN)."""
+    finite = [(v, e) for e, v in enumerate(val_loss, 1) if math.isfinite(v)]
+    return min(finite)[1] if finite else None
+
+
+def should_stop(val_loss: list[float], patience: int) -> bool:
+    """Validation-based stopping: ``patience`` epochs have passed without a lower validation loss
+    than the best one. ``patience`` 0: never (train every epoch of ``train.epochs``)."""
+    best = best_epoch(val_loss)
+    return patience > 0 and best is not None and len(val_loss) - best >= patience
 
 
 def _load_resume(ckpt_path: Path, net, opt, epochs: int) -> tuple[dict | None, int]:
@@ -309,10 +348,12 @@ def train(cfg: DictConfig) -> Path | None:
     upstream = {"label": label_dir.name, "generate": gen_dir.name}
     version = compute_version(STAGE, config, upstream)
     resume_config = copy.deepcopy(config)
-    resume_config["train"].pop("epochs")
+    # Neither the epoch budget, the stopping rule nor th changes an epoch's weights.
+    for key in ("epochs", "patience", "threshold", "threshold_grid"):
+        resume_config["train"].pop(key)
     resume_dir = Path(cfg.paths.models) / STAGE / (RESUME_PREFIX + compute_version(
         STAGE + "-resume", resume_config, upstream, code_of=STAGE))
-    ckpt_path = resume_dir / CHECKPOINT
+    ckpt_path, best_path = resume_dir / CHECKPOINT, resume_dir / BEST
     cache_dir = data_root(cfg) / ".cache" / "depth" / gen_dir.name
     seed, tc = int(cfg.seed), cfg.train
     progress = bool(cfg.logging.progress) and ctx.is_main
@@ -321,6 +362,8 @@ def train(cfg: DictConfig) -> Path | None:
                           lambda_coord=float(tc.lambda_coord),
                           lambda_class=float(tc.lambda_class))
     batch = int(tc.batch_size)
+    # channels_last: the same arithmetic in another memory layout (faster convolutions on CPU).
+    memory_format = torch.channels_last if bool(tc.channels_last) else torch.contiguous_format
     if batch < ctx.world_size:
         raise ValueError(f"train.batch_size={batch} is smaller than the {ctx.world_size} "
                          "processes: each needs at least one image of every batch")
@@ -337,7 +380,7 @@ def train(cfg: DictConfig) -> Path | None:
         torch.use_deterministic_algorithms(True, warn_only=device.type == "cuda")
         torch.set_num_threads(max(1, int(tc.num_threads) // ctx.local_world_size))
         torch.manual_seed(seed)
-        net = GraspNet(net_cfg).to(run_device)
+        net = GraspNet(net_cfg).to(run_device, memory_format=memory_format)
         opt = torch.optim.Adam(net.parameters(), lr=float(tc.lr),
                                betas=tuple(float(b) for b in tc.betas))
         return net, opt
@@ -354,6 +397,9 @@ def train(cfg: DictConfig) -> Path | None:
         images_done, train_s = 0, 0.0
         n = len(train_set)
         for epoch in range(start_epoch, int(tc.epochs)):
+            if distributed.broadcast(ctx, should_stop(history["val_loss"], int(tc.patience))
+                                     if ctx.is_main else None):
+                break
             batches, weights = _epoch_batches(n, batch, seed, epoch, tc.augment_flip, ctx)
             loader = make_loader(train_set, batches, int(tc.loader_workers))
             model.train()
@@ -362,7 +408,8 @@ def train(cfg: DictConfig) -> Path | None:
             bar = tqdm(zip(loader, weights), total=len(batches), unit="batch",
                        desc=f"train epoch {epoch + 1}/{tc.epochs}", disable=not progress)
             for s, ((x, targets), weight) in enumerate(bar):
-                loss = grasp_loss(model(x.to(run_device)), targets, loss_cfg)
+                loss = grasp_loss(model(x.to(run_device, memory_format=memory_format)), targets,
+                                  loss_cfg)
                 if not torch.isfinite(loss["total"]):
                     raise FloatingPointError(f"loss is {float(loss['total'])} at epoch {epoch + 1}"
                                              f" step {s}; lower train.lr or check the labels")
@@ -423,6 +470,9 @@ def train(cfg: DictConfig) -> Path | None:
 
             def end_of_epoch(epoch: int) -> None:
                 history["val_loss"].append(evaluate_loss(net, sets["val"], loss_cfg, run_device))
+                if best_epoch(history["val_loss"]) == epoch + 1:  # before the checkpoint: a
+                    # resume re-runs an epoch whose checkpoint is missing, and rewrites this
+                    _save_atomic({"model": _cpu_state(net), "epoch": epoch + 1}, best_path)
                 _save_atomic({"model": _cpu_state(net), "optimizer": _cpu_state(opt),
                               # Without paths and logging: where a run writes and how it logs
                               # do not change the model, and the file must not depend on them.
@@ -439,14 +489,41 @@ def train(cfg: DictConfig) -> Path | None:
 
         def _finish(run: StageRun, net, sets, history, images_done, train_s, start_epoch) -> None:
             steps_per_epoch = math.ceil(len(sets["train"]) / batch)
-            ranking = ranking_config(cfg)
+            # The model is the epoch with the lowest validation loss (validation-based stopping).
+            chosen = best_epoch(history["val_loss"]) or len(history["train_loss"])
+            if chosen != len(history["train_loss"]):
+                best = torch.load(best_path, map_location="cpu", weights_only=True) \
+                    if best_path.is_file() else {}
+                if best.get("epoch") != chosen:
+                    raise ArtifactError(
+                        f"[train] {best_path} does not hold epoch {chosen}, the epoch with the "
+                        f"lowest validation loss: delete {resume_dir} and train again")
+                net.load_state_dict(best["model"])
+            # th of Eq. 3: calibrated on the validation split, or fixed by train.threshold.
+            grid = sorted(float(t) for t in tc.threshold_grid)
+            if not grid:
+                raise ValueError("train.threshold_grid is empty: list the th values to calibrate "
+                                 "over, e.g. train.threshold_grid=[0.1,0.2,0.3]")
+            planner = Planner(net, norm, ranking_config(cfg, grid[0]), run_device)
+            t1 = time.perf_counter()
+            th_curve = threshold_curve(ranked_images(planner, sets["val"], progress), grid,
+                                       float(tc.match_radius_px))
+            threshold = (choose_threshold(th_curve) if tc.threshold is None
+                         else float(tc.threshold))
+            run.timings["calibration_s"] = round(time.perf_counter() - t1, 3)
+            planner.ranking = ranking_config(cfg, threshold)
+            write_rows(run.work_dir / "threshold_curve.csv",
+                       [{k: (round(v, 6) if isinstance(v, float) else v) for k, v in r.items()}
+                        for r in th_curve])
             model_blob = {"state_dict": _cpu_state(net), "network": dataclasses.asdict(net_cfg),
-                          "normalisation": norm.as_dict(), "ranking": dataclasses.asdict(ranking),
+                          "normalisation": norm.as_dict(),
+                          "ranking": dataclasses.asdict(planner.ranking),
                           "classes": [c.name for c in GraspClass]}
             torch.save(model_blob, run.work_dir / MODEL_FILE)
             if ckpt_path.is_file():
                 (run.work_dir / CHECKPOINT).write_bytes(ckpt_path.read_bytes())
-            planner = Planner(net, norm, ranking, run_device)
+            print(f"train: th = {threshold:g} "
+                  f"({'calibrated on val' if tc.threshold is None else 'train.threshold'})")
 
             t1 = time.perf_counter()
             result = table1(planner, sets["test"], float(tc.match_radius_px))
@@ -471,24 +548,31 @@ def train(cfg: DictConfig) -> Path | None:
                     "lost_fraction": round(lost / max(total, 1), 6),
                     "per_split": {s: {"lost": d.lost_points, "total": d.total_points}
                                   for s, d in sets.items()}},
-                "epochs": int(tc.epochs),
+                "epochs": len(history["train_loss"]),
+                "max_epochs": int(tc.epochs),
+                "best_epoch": chosen,
+                "stopped_early": len(history["train_loss"]) < int(tc.epochs),
                 "train_loss_per_epoch": [round(v, 6) for v in history["train_loss"]],
                 "val_loss_per_epoch": [round(v, 6) if math.isfinite(v) else None
                                        for v in history["val_loss"]],
+                "threshold": {"value": threshold,
+                              "rule": "calibrated" if tc.threshold is None else "fixed",
+                              "curve": [{k: (round(v, 6) if isinstance(v, float) else v)
+                                         for k, v in r.items()} for r in th_curve]},
                 "table1": result,
                 "table1_definition": "see pipeline/planner/evaluate.py (module docstring)",
                 "pr_curve": downsample_curve(curve),
                 "device": device.type,
             })
             run.timings.update({
-                "train_s": round(train_s, 3), "epochs_run_here": int(tc.epochs) - start_epoch,
+                "train_s": round(train_s, 3), "epochs_run_here": len(history["train_loss"]) - start_epoch,
                 "processes": ctx.world_size, "loader_workers": int(tc.loader_workers),
                 "train_images_per_s": round(images_done / train_s, 3) if train_s else None})
 
             with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version) as log:
                 _log_history(log, history, steps_per_epoch)
                 end_ns = (len(history["step_total"]) + 1) * 1_000_000
-                log.set_time(sequences={"epoch": int(tc.epochs)}, clock_ns=end_ns)
+                log.set_time(sequences={"epoch": len(history["train_loss"])}, clock_ns=end_ns)
                 for key in ("top1", "top1pct", "top5pct", "top10pct"):
                     if result[key] is not None:
                         log.log_scalar(f"test/table1/{key}", result[key])

@@ -20,6 +20,8 @@ def test_no_grasp_is_a_miss_and_no_centre_is_not_scored():
 
 def test_within_rate_counts_misses_and_skips_unscored_images():
     d = np.array([3.0, 29.9, 30.0, 31.0, math.inf, math.nan])
-    # Scored: 5 images (nan skipped); within 30 px: 3.0, 29.9 and 30.0 → 3 / 5.
-    assert within_rate(d, 30.0) == 0.6
-    assert list(within_curve(d, np.array([5, 30, 50]))) == [0.2, 0.6, 0.8]
+    # Scored: 5 images (nan skipped); less than 30 px (the paper's words): 3.0 and 29.9 → 2 / 5.
+    assert within_rate(d, 30.0) == 0.4
+    # The earlier definition, at most 30 px, also counts the 30.0 → 3 / 5.
+    assert within_rate(d, 30.0, inclusive=True) == 0.6
+    assert list(within_curve(d, np.array([5, 30, 50]))) == [0.2, 0.4, 0.8]

@@ -70,7 +70,12 @@ def _section(readme: str, heading: str) -> str:
 
 def _md_table(text: str) -> list[dict[str, str]]:
     """The first Markdown table in ``text`` as one dict per row (cells stripped)."""
-    rows = [line for line in text.splitlines() if line.startswith("|")]
+    rows = []
+    for line in text.splitlines():
+        if line.startswith("|"):
+            rows.append(line)
+        elif rows:  # the first table has ended
+            break
     cells = [[c.strip() for c in row.strip().strip("|").split("|")] for row in rows]
     return [dict(zip(cells[0], r)) for r in cells[2:]]
 
@@ -414,11 +419,26 @@ def test_table1_matches_train_manifest(root_a: Path, report_a: Path) -> None:
     assert train_dir.name in readme and TRAIN_NOT_RUN not in readme
     section = _section(readme, f"## {TABLE1_SECTION}")
     rows = {r[""]: r for r in _md_table(section)}
-    assert list(rows) == ["paper", "this reproduction"]
+    th = manifest["metrics"]["threshold"]["value"]
+    pooled = f"this reproduction, pooled top k % (th = {th:g})"
+    per_image = f"this reproduction, per-image top k % (th = {th:g})"
+    old = "old definition (no threshold; top 1 over images with a prediction)"
+    assert list(rows) == ["paper", pooled, per_image, old]
+    assert ours["threshold"] == th
     assert [rows["paper"][h] for h in COLUMNS] == ["83.10 %", "80.25 %", "67.22 %", "55.64 %"]
+
+    def pct(v):
+        return "—" if v is None else f"{100 * v:.2f} %"
     for header, key in COLUMNS.items():
-        expected = "—" if ours[key] is None else f"{100 * ours[key]:.2f} %"
-        assert rows["this reproduction"][header] == expected, header
+        assert rows[pooled][header] == pct(ours[key]), header
+        assert rows[old][header] == pct(ours["legacy"][key]), header
+        assert rows[per_image][header] == pct(ours["top1"] if key == "top1"
+                                              else ours["per_image"][key]), header
+    # the calibration curve that chose th is shown, with th among its rows
+    curve = _md_table(section[section.index("**Threshold th = "):])
+    assert [float(r["th"]) for r in curve] == [
+        r["threshold"] for r in manifest["metrics"]["threshold"]["curve"]]
+    assert th in [float(r["th"]) for r in curve]
     # the definition and the network are described right there, without timings
     assert "same class" in section and "NG" in section and "ceil(k/100" in section
     assert f"{ours['radius_px']:g} pixels" in section
@@ -434,10 +454,9 @@ def test_table1_matches_train_manifest(root_a: Path, report_a: Path) -> None:
     for header, key in COLUMNS.items():
         assert float(table["paper"][header]) == pytest.approx(100 * PAPER_TABLE1[key], abs=1e-4)
         if ours[key] is None:
-            assert table["this reproduction"][header] == ""
+            assert table[pooled][header] == ""
         else:
-            assert float(table["this reproduction"][header]) == pytest.approx(
-                100 * ours[key], abs=1e-4)
+            assert float(table[pooled][header]) == pytest.approx(100 * ours[key], abs=1e-4)
     assert (report_a / "figures" / "pr_curve.png").read_bytes()[:8] == PNG_SIGNATURE
     assert "train_version" not in load_manifest(report_a)["config"]["report"]
 

@@ -228,7 +228,8 @@ class TrainConfig:
     """The training stage (``pipeline.train``) and what it stores for the planner."""
 
     label_version: str = "latest"
-    epochs: int = MISSING
+    epochs: int = MISSING  # the most epochs; fewer when validation-based stopping ends it
+    patience: int = 0  # stop after this many epochs without a lower val loss (0: never)
     batch_size: int = 16  # paper Sec. 6
     lr: float = 1.0e-4  # Adam, paper Sec. 6
     betas: List[float] = field(default_factory=lambda: [0.9, 0.999])
@@ -240,7 +241,9 @@ class TrainConfig:
     missing_depth_value: float = 0.5  # network input where depth = 0 (no data)
     augment_flip: str = "none"  # "none" | "u" (horizontal) | "v" (vertical) | "uv"
     max_train_images: int = 0  # 0 = the whole train split
-    threshold: float = 0.5  # th of Eq. 3, stored with the model for the planner
+    channels_last: bool = False  # train in the channels-last memory layout (faster on CPU)
+    threshold: Optional[float] = None  # th of Eq. 3; None: calibrated on val (planner.calibration)
+    threshold_grid: List[float] = field(default_factory=list)  # th values calibration scores (conf)
     match_radius_px: float = 16.0  # Table 1: a prediction within this of a same-class truth
     num_threads: int = 2  # torch CPU threads (fixed: results depend on it); split among DDP ranks
     loader_workers: int = 1  # processes decoding batches (0 = the training process); result-neutral

@@ -40,7 +40,7 @@ class OraclePlanner:
         self.cfg, self.cell = cfg, cell
         self.robot = RobotChecker(cfg)
         self.ranking = dataclasses.replace(
-            ranking_config(cfg), threshold=0.5, policy=str(cfg.evaluate.ranking_policy),
+            ranking_config(cfg, threshold=0.5), policy=str(cfg.evaluate.ranking_policy),
             inclination_tie=math.radians(float(cfg.evaluate.inclination_tie_deg)))
 
     def scene(self, frame: Frame, intr: Intrinsics) -> Scene:

@@ -9,9 +9,11 @@ Definition (the paper's, made exact here and printed in the report):
   region, projected to pixels. Not the labelling stage's detected surfaces.
 * **Distance.** For each test image, the pixel distance from the planner's optimal grasp point
   (G_opt: the first ranked candidate) to the nearest true centre.
-* **Within r px.** The share of images whose distance is at most r. Images with no visible face
-  are skipped; an image where a planner returns no grasp counts as a miss for that planner
-  (distance = inf), so every planner is scored over the same images.
+* **Within r px.** The share of images whose distance is less than r (the paper: "less than 30
+  pixels"). Images with no visible face are skipped; an image where a planner returns no grasp
+  counts as a miss for that planner (distance = inf), so every planner is scored over the same
+  images. The earlier definition, "at most r", is kept as a labelled column of the report
+  (``inclusive=True``).
 """
 
 from __future__ import annotations
@@ -36,11 +38,14 @@ def nearest_centre_distance(point_uv: np.ndarray | None, centres_uv: np.ndarray)
     return float(np.min(np.linalg.norm(centres - np.asarray(point_uv, np.float64), axis=1)))
 
 
-def within_rate(distances: np.ndarray, radius_px: float) -> float:
-    """Share of scored images (finite or inf distance; nan skipped) within ``radius_px``."""
+def within_rate(distances: np.ndarray, radius_px: float, inclusive: bool = False) -> float:
+    """Share of scored images (finite or inf distance; nan skipped) closer than ``radius_px``
+    (``inclusive``: at most ``radius_px``, the earlier definition)."""
     d = np.asarray(distances, np.float64)
     d = d[~np.isnan(d)]
-    return float(np.mean(d <= radius_px)) if len(d) else float("nan")
+    if not len(d):
+        return float("nan")
+    return float(np.mean(d <= radius_px if inclusive else d < radius_px))
 
 
 def within_curve(distances: np.ndarray, radii: np.ndarray) -> np.ndarray:

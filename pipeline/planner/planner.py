@@ -223,11 +223,12 @@ def _has_data(depth_m: np.ndarray, u: float, v: float) -> bool:
     return bool(depth_m[int(np.clip(round(v), 0, H - 1)), int(np.clip(round(u), 0, W - 1))] > 0)
 
 
-def ranking_config(cfg) -> RankingConfig:
-    """The ranking config of a pipeline config: th from ``train.threshold``, D_ground = camera
-    height above the bin floor + floor thickness (the camera–ground distance, Eq. 9)."""
+def ranking_config(cfg, threshold: float) -> RankingConfig:
+    """The ranking config of a pipeline config with th = ``threshold`` (the training stage's
+    calibrated or fixed value, ``pipeline.planner.calibration``); D_ground = camera height above
+    the bin floor + floor thickness (the camera–ground distance, Eq. 9)."""
     return RankingConfig(d_ground=float(cfg.camera.height_above_bin_floor + cfg.bin.floor_thickness),
-                         threshold=float(cfg.train.threshold))
+                         threshold=float(threshold))
 
 
 def ranking_dict(r: RankingConfig) -> dict:
