@@ -299,6 +299,7 @@ def evaluate(cfg: DictConfig) -> Path:
         results = [r for r, _ in out]
         trials = [{"planner": r.planner, "trial": r.trial, "boxes": r.boxes, "picked": r.picked,
                    "end": r.end, "sim_s": round(r.sim_s, 4),
+                   **({"no_grasp": r.no_grasp} if r.no_grasp else {}),
                    "attempts": [{k: v for k, v in dataclasses.asdict(a).items()
                                  if k != "planning_s"} for a in r.attempts]}
                   for r in results]

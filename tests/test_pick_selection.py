@@ -61,11 +61,16 @@ def test_a_reachable_target_is_chosen_and_a_rejected_one_never(runner):
     # G_opt is the rejected one: the next candidate is executed, never G_opt
     assert runner.select(frame, [bad, good], [])[:2] == (good, "B")
     # nothing passes: no grasp (the trial ends), G_opt is not run anyway
-    assert runner.select(frame, [bad, bad], []) is None
+    rejected = {}
+    assert runner.select(frame, [bad, bad], [], rejected) is None
+    # the point on the bin floor near a corner: the hand at that pose is in the walls
+    assert rejected == {"collision": 2}
     runner.plans.append([bad])
     runner.cell.reset = lambda rng, count: None  # the trial keeps this heap
     result = runner.run_trial(0, np.random.default_rng(0), np.random.default_rng(1))
     assert result.end == "no_grasp" and result.attempts == []
+    assert result.no_grasp == {"boxes_left": 1, "candidates": 1, "checked": 1,
+                               "rejected": {"collision": 1}}
 
 
 def test_a_retry_after_a_failure_differs(runner):
@@ -86,7 +91,9 @@ def test_a_retry_after_a_failure_differs(runner):
     # the same candidate is skipped by select; with retry_policy=repeat it is chosen again
     frame, u, v = _pixel_of(runner, P)
     cand = SimpleNamespace(u=u, v=v, grasp_class=GraspClass.B)
-    assert runner.select(frame, [cand], failed) is None
+    rejected = {}
+    assert runner.select(frame, [cand], failed, rejected) is None
+    assert rejected == {"repeat": 1}
     runner.cfg.evaluate.retry_policy = "repeat"
     assert runner.select(frame, [cand], failed)[:2] == (cand, "B")
 

@@ -106,6 +106,11 @@ class TrialResult:
     end: str
     attempts: list[Attempt]
     trace: list[dict] = field(default_factory=list)  # per control step, for the logs
+    # end "no_grasp": why. ``candidates``: the planner's candidates at home (after the area
+    # check), ``checked``: how many the selection looked at, ``rejected``: (candidate, pattern)
+    # pairs per reason (the robot check's NG reason, "descriptor" when it found no surface,
+    # "repeat" for a retry of a failed plan). Empty for other ends.
+    no_grasp: dict = field(default_factory=dict)
 
     @property
     def sim_s(self) -> float:
@@ -268,7 +273,8 @@ class PickRunner:
         T = frame.T_world_cam
         return target, T[:3, :3] @ point + T[:3, 3]
 
-    def select(self, frame: Frame, cands: list, failed: list[dict]):
+    def select(self, frame: Frame, cands: list, failed: list[dict],
+               rejected: dict[str, int] | None = None):
         """The grasp to execute: ``(candidate, pattern, hand X axis in the world or None for the
         paper's rule, the check's predicted camera poses or None)`` of the best-ranked
         candidate, among the
@@ -276,18 +282,26 @@ class PickRunner:
         (``_repeats_failure``) and, with ``evaluate.check_reachability``, passes the robot-level
         check with that pattern; None when no candidate does (the trial ends with "no grasp").
 
-        A candidate the check rejects is never executed (the check: ``_reachable``)."""
+        A candidate the check rejects is never executed (the check: ``_reachable``).
+        ``rejected``: if given, counts the rejected (candidate, pattern) pairs per reason."""
         gate = bool(self.cfg.evaluate.check_reachability)
+        rejected = {} if rejected is None else rejected
+
+        def reject(reason: str) -> None:
+            rejected[reason] = rejected.get(reason, 0) + 1
+
         for cand in cands[: int(self.cfg.evaluate.max_candidates_checked)]:
             target, point = self._target_of(frame, cand)
             for pattern in self._patterns(cand):
                 if self._repeats_failure(target, pattern, point, failed):
+                    reject("repeat")
                     continue
                 if not gate:
                     return cand, pattern, None, None
-                check = self._reachable(frame, cand, pattern, target)
+                check, reason = self._check(frame, cand, pattern, target)
                 if check is not None:
                     return cand, pattern, check.x_world, check.path
+                reject(reason)
         return None
 
     def _repeats_failure(self, target: int, pattern: str, point: np.ndarray | None,
@@ -313,6 +327,10 @@ class PickRunner:
         return False
 
     def _reachable(self, frame: Frame, cand, pattern: str, target: int):
+        """The passing ``GraspCheck`` of ``_check``, or None when it rejects the candidate."""
+        return self._check(frame, cand, pattern, target)[0]
+
+    def _check(self, frame: Frame, cand, pattern: str, target: int):
         """The robot-level check of the labelling stage for a grasp at the candidate
         (``pipeline.labelling.robot_check.check_grasp``: the grasp pose and, with
         ``robot.path_check``, the servo's predicted motion from home to it): the descriptor must
@@ -320,15 +338,16 @@ class PickRunner:
         axis nearer the image X, turned about the normal by the first of ``hand.rotations_deg``
         that works.
 
-        Returns the passing ``GraspCheck`` (the hand's X axis in the world, the predicted camera
-        poses), or None when the check rejects the candidate."""
+        Returns (the passing ``GraspCheck`` (the hand's X axis in the world, the predicted camera
+        poses), None), or (None, the reason) when the check rejects the candidate: the check's
+        NG reason, or "descriptor" when the descriptor finds no surface at the point."""
         from pipeline.labelling.robot_check import check_grasp
         from pipeline.servo.descriptor import describe_surface
 
         feats, _ = describe_surface(frame.depth_m, self.cell.intrinsics,
                                     np.array([cand.u, cand.v], np.float64), self.descriptor_cfg)
         if feats is None:
-            return None
+            return None, "descriptor"
         # where the servo will put the active cup: the planner's own point (Dex-Net), else the
         # centre of the surface the descriptor finds at the candidate (what the servo tracks)
         fixed = self._fixed_point(cand)
@@ -338,7 +357,7 @@ class PickRunner:
                             paper_x_axis(feats), pattern, self.cell.intrinsics,
                             self.cell.obstacles, [target] if target >= 0 else [],
                             self.cell.cell_ids[1:])
-        return check if check.reason is None else None
+        return (check, None) if check.reason is None else (None, str(check.reason))
 
     def _first_goal(self, centre_cam: np.ndarray, feats, ref_cam, pattern: str,
                     T_world_cam: np.ndarray):
@@ -624,6 +643,7 @@ class PickRunner:
         failed: list[dict] = []  # the failed attempts' plans (``_repeats_failure``)
         trace: list[dict] | None = [] if keep_trace else None
         end = "max_attempts"
+        no_grasp: dict = {}
         for index in range(int(ev.max_attempts_per_trial)):
             if not self.cell.boxes_in_bin():
                 end = "bin_empty"
@@ -631,10 +651,15 @@ class PickRunner:
             frame, cands, planning_s = self.plan_at_home(rng_plan)
             t0 = time.perf_counter()
             cands = self._large_enough(frame, cands)
-            chosen = self.select(frame, cands, failed) if cands else None
+            rejected: dict[str, int] = {}
+            chosen = self.select(frame, cands, failed, rejected) if cands else None
             planning_s += time.perf_counter() - t0  # the run-time check is planning time too
             if chosen is None:
                 end = "no_grasp"
+                no_grasp = {"boxes_left": len(self.cell.boxes_in_bin()),
+                            "candidates": len(cands),
+                            "checked": min(len(cands), int(ev.max_candidates_checked)),
+                            "rejected": dict(sorted(rejected.items()))}
                 break
             cand, pattern, x_world, predicted = chosen
             target, point = self._target_of(frame, cand)
@@ -655,4 +680,4 @@ class PickRunner:
                 end = "bin_empty"
         picked = sum(a.outcome == "success" for a in attempts)
         return TrialResult(trial=trial, planner=self.name, boxes=boxes, picked=picked, end=end,
-                           attempts=attempts, trace=trace or [])
+                           attempts=attempts, trace=trace or [], no_grasp=no_grasp)
