@@ -11,7 +11,7 @@ RUN := $(PY) -m
 # NPROC > 1: data-parallel training, one process per CPU share or GPU (torchrun + DDP).
 TRAIN := $(if $(filter-out 1,$(NPROC)),.venv/bin/torchrun --standalone --nproc_per_node=$(NPROC) -m,$(RUN)) pipeline.train
 
-.PHONY: help setup test test-slow reproduce generate label train baseline evaluate ablation robustness report verify view bench repro-check lock clean
+.PHONY: help setup test test-slow reproduce generate label train baseline evaluate unseen ablation robustness report verify view bench repro-check lock clean
 
 help: ## List the targets
 	@grep -hE '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  make %-12s %s\n", $$1, $$2}'
@@ -32,6 +32,7 @@ reproduce: setup ## Run every stage with EXPERIMENT (default: default), then the
 	$(TRAIN) experiment=$(EXPERIMENT) $(ARGS)
 	$(RUN) pipeline.baseline experiment=$(EXPERIMENT) $(ARGS)
 	$(RUN) pipeline.evaluate experiment=$(EXPERIMENT) $(ARGS)
+	$(RUN) pipeline.unseen experiment=$(EXPERIMENT) $(ARGS)
 	$(RUN) pipeline.ablation experiment=$(EXPERIMENT) $(ARGS)
 	$(RUN) pipeline.robustness experiment=$(EXPERIMENT) $(ARGS)
 	$(RUN) pipeline.report experiment=$(EXPERIMENT) $(ARGS)
@@ -50,6 +51,9 @@ baseline: setup ## Dex-Net-style comparison: GQ-CNN + CEM suction planner and Ta
 
 evaluate: setup ## Closed-loop picking trials: descriptor, 2.5D VS, suction; Table 3 (Secs. 5, 6)
 	$(RUN) pipeline.evaluate experiment=$(EXPERIMENT) $(ARGS)
+
+unseen: setup ## Unseen box sizes: Tables 1 and 2 on heaps of boxes not seen in training
+	$(RUN) pipeline.unseen experiment=$(EXPERIMENT) $(ARGS)
 
 ablation: setup ## Execution ablation: each closed-loop extension on and off on the same heaps
 	$(RUN) pipeline.ablation experiment=$(EXPERIMENT) $(ARGS)

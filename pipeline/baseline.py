@@ -36,7 +36,6 @@ import csv
 import dataclasses
 import json
 import math
-import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -52,6 +51,7 @@ from pipeline.artifacts import (
 )
 from pipeline.artifacts.store import ArtifactError, StageRun
 from pipeline.cli import CONF_DIR, data_root, stage_main
+from pipeline.dataset.pixels import pixels_to_points
 from pipeline.dataset.scenes import SPLIT_CODES, SPLITS, Scene, SceneDataset
 from pipeline.dataset.storage import read_npz, write_npz
 from pipeline.dexnet.contact import REASONS, SuctionModelConfig, evaluate_contacts, robust_quality
@@ -429,14 +429,14 @@ def _log_table2_samples(log: StageLog, cfg, gen_dir: Path, model_dir: Path, resu
         log.set_time(sequences={"test_image": i}, clock_ns=(10_000 + i) * 1_000_000_000)
         log.log_camera("table2/camera", scene.intrinsics, scene.T_world_cam)
         log.log_depth("table2/camera/depth", scene.depth_m)
-        pts = _pixels_to_points(scene, result["centres"][i])
+        pts = pixels_to_points(scene, result["centres"][i])
         log.log_points("table2/camera/true_centres", pts,
                        np.full((len(pts), 3), 255, np.uint8))
         parts = []
         for name in result["planners"]:
             uv = result[f"{name}_uv"][i]
             if np.all(np.isfinite(uv)):
-                p = _pixels_to_points(scene, uv.reshape(1, 2))
+                p = pixels_to_points(scene, uv.reshape(1, 2))
                 log.log_points(f"table2/camera/{name}", p,
                                np.array([PLANNER_COLORS[name]], np.uint8))
             parts.append(f"{name} {result[f'{name}_dist'][i]:.1f} px")
@@ -448,18 +448,6 @@ def _log_table2_samples(log: StageLog, cfg, gen_dir: Path, model_dir: Path, resu
                                _quality_colors(it.scores))
         log.log_text("log", f"test image {i}: distance to the nearest true centre: "
                             + ", ".join(parts))
-
-
-def _pixels_to_points(scene: Scene, uv: np.ndarray) -> np.ndarray:
-    """(N, 2) pixels → (N, 3) float32 camera-frame points at the ideal depth, metres."""
-    uv = np.asarray(uv, np.float64).reshape(-1, 2)
-    h, w = scene.depth_clean_m.shape
-    u = np.clip(np.round(uv[:, 0]).astype(int), 0, w - 1)
-    v = np.clip(np.round(uv[:, 1]).astype(int), 0, h - 1)
-    z = scene.depth_clean_m[v, u].astype(np.float64)
-    k = scene.intrinsics
-    return np.stack([(uv[:, 0] - k.cx) / k.fx * z, (uv[:, 1] - k.cy) / k.fy * z, z],
-                    axis=1).astype(np.float32)
 
 
 # --------------------------------------------------------------------------------------------

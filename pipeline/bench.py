@@ -770,11 +770,11 @@ def main(argv: list[str] | None = None) -> int:
     results["train_default_images_per_s"] = training_images_per_s(width)
     results["train_default_channels_last_images_per_s"] = training_images_per_s(
         width, channels_last=True)
-    print(f"training, default network (width {width}), batch 16: "
-          f"{results['train_default_images_per_s']:.1f} images/s contiguous, "
-          f"{results['train_default_channels_last_images_per_s']:.1f} images/s channels_last "
-          f"({results['train_default_channels_last_images_per_s'] / "
-          f"results['train_default_images_per_s']:.2f}x, same run)")
+    contiguous = results["train_default_images_per_s"]
+    channels_last = results["train_default_channels_last_images_per_s"]
+    print(f"training, default network (width {width}), batch 16: {contiguous:.1f} images/s "
+          f"contiguous, {channels_last:.1f} images/s channels_last "
+          f"({channels_last / contiguous:.2f}x, same run)")
     results["label_vs_generate_1w"] = results["label_1w_scenes_per_s"] / one
     print(f"labelling / generation, per process:    {results['label_vs_generate_1w']:.2f} "
           "(target >= 1: labelling is not the bottleneck)")

@@ -19,6 +19,7 @@ versioned artifact ``data/report/<version>/``::
     tables/table1_precision.csv   Table 1: precision top 1 / top 1 % / 5 % / 10 %, paper and ours
     tables/threshold_calibration.csv  the validation curve that chose th (Eq. 3)
     figures/pr_curve.png          the DCNN's precision–recall curve on the test split
+    tables/unseen_table1.csv, unseen_table2.csv  Tables 1 and 2 on unseen box sizes
     tables/robustness_*.csv       the robustness study (sensor model, Tables 1–2 per input,
                                   closed-loop variants, Sec. 8.4's policies, failures)
     figures/robustness_depth.png  ideal, sensor-model and filtered depth of one test image
@@ -113,7 +114,7 @@ SECTIONS = ("report",)
 NOT_AFFECTING_RESULT = ("report.force", "report.generate_version", "report.label_version",
                         "report.train_version", "report.baseline_version",
                         "report.evaluate_version", "report.robustness_version",
-                        "report.ablation_version")
+                        "report.ablation_version", "report.unseen_version")
 # Files whose content is measured wall-clock time: the same artifacts give other numbers on
 # another run, so `make repro-check` skips them (they are listed in metrics.volatile_files).
 VOLATILE_FILES = ("tables/planning_time.csv", "tables/table3_timing.csv")
@@ -1006,6 +1007,73 @@ def render_ablation(ablation, tables: dict[str, Table]) -> list[str]:
     return out
 
 
+# ---------------------------------------------------------------------- unseen box sizes
+UNSEEN_SECTION = "Unseen box sizes: Tables 1 and 2 on boxes not seen in training"
+UNSEEN_NOT_RUN = "Unseen box sizes: not run yet (`make unseen`)."
+
+
+def resolve_unseen(root: Path, version: str):
+    """(folder, metrics) of the unseen-size artifact to report, or None when there is none."""
+    folder = _optional_artifact(root, "unseen", version)
+    if folder is None:
+        return None
+    metrics = load_manifest(folder).get("metrics") or {}
+    if not all(isinstance(metrics.get(k), list) for k in ("table1", "table2", "boxes")):
+        raise ArtifactError(f"{folder.name}/manifest.json (unseen) lacks metrics.table1 / "
+                            "table2 / boxes; recompute it with `make unseen` "
+                            "(unseen.force=true).")
+    return folder, metrics
+
+
+def unseen_table1(metrics: dict) -> Table:
+    """Table 1 of the trained network on the seen- and the unseen-size test split (percent)."""
+    keys = ("top1", "top1pct", "top5pct", "top10pct", "per_image_top1pct",
+            "per_image_top5pct", "per_image_top10pct")
+    headers = ["box sizes", "th", "Top 1", "Top 1 % (pooled)", "Top 5 % (pooled)",
+               "Top 10 % (pooled)", "Top 1 % (per image)", "Top 5 % (per image)",
+               "Top 10 % (per image)", "scored images", "no prediction"]
+    rows = [[r["set"], _num(r.get("threshold")), *(_times(r.get(k)) for k in keys),
+             _int(r.get("scored_images")), _int(r.get("no_prediction_images"))]
+            for r in metrics["table1"]]
+    return Table("unseen_table1", headers, rows,
+                 ["", "{:g}"] + ["{:.2f} %"] * len(keys) + ["{}", "{}"], text_columns=1)
+
+
+def unseen_table2(metrics: dict) -> Table:
+    """Table 2 of every planner on the seen- and the unseen-size test split (percent)."""
+    key, radius = _within_key(metrics["table2"])
+    headers = ["box sizes", "planner", f"less than {radius} px", "images", "no grasp",
+               "median distance (px)"]
+    rows = [[r["set"], r.get("name", r["planner"]), _times(r.get(key)), _int(r.get("images")),
+             _int(r.get("no_grasp")), _num(r.get("median_distance_px"))]
+            for r in metrics["table2"]]
+    return Table("unseen_table2", headers, rows,
+                 ["", "", "{:.2f} %", "{}", "{}", "{:.1f}"], text_columns=2)
+
+
+def render_unseen(unseen, tables: dict[str, Table]) -> list[str]:
+    out = [f"## {UNSEEN_SECTION}", ""]
+    if unseen is None:
+        return out + [UNSEEN_NOT_RUN, ""]
+    folder, metrics = unseen
+    sizes = ", ".join(f"{b['name']} {' x '.join(f'{1000 * x:g}' for x in b['size'])} mm"
+                      for b in metrics["boxes"])
+    out += [
+        f"Unseen-size artifact `{folder.name}` (`python -m pipeline.unseen`): the trained "
+        "network and the Dex-Net-style planners, all trained on the three training sizes, on a "
+        f"test split of heaps of other boxes ({sizes}), beside the same tables on the training "
+        "sizes' test split (*seen*, from the train and baseline artifacts). Definitions as in "
+        "Tables 1 and 2 above; the network plans at its calibrated th.",
+        "",
+        tables["unseen_table1"].markdown(),
+        tables["unseen_table2"].markdown(),
+        "CSV versions: [tables/unseen_table1.csv](tables/unseen_table1.csv), "
+        "[tables/unseen_table2.csv](tables/unseen_table2.csv).",
+        "",
+    ]
+    return out
+
+
 # ---------------------------------------------------------------------- robustness (Secs. 8.4-8.5)
 ROBUSTNESS_SECTION = "Robustness: sensor noise and the failure cases (Secs. 8.4, 8.5)"
 ROBUSTNESS_NOT_RUN = ("Robustness study: not run yet (`make robustness`, i.e. "
@@ -1322,7 +1390,7 @@ def render_readme(version: str, upstream: dict[str, tuple[str, dict]], tables: d
                   baseline: BaselineInfo | None = None,
                   evaluated: EvaluateInfo | None = None,
                   robustness: RobustnessInfo | None = None,
-                  robustness_note: str | None = None, ablation=None) -> str:
+                  robustness_note: str | None = None, ablation=None, unseen=None) -> str:
     phys = gen_cfg.get("physics", {})
     dt = float(phys.get("time_step", 1 / 240))
     cap = phys.get("max_settle_steps")
@@ -1353,6 +1421,8 @@ def render_readme(version: str, upstream: dict[str, tuple[str, dict]], tables: d
         out.append(f"| robustness | not run yet (`make robustness`) | {NONE} |")
     if ablation is None:
         out.append(f"| ablation | not run yet (`make ablation`) | {NONE} |")
+    if unseen is None:
+        out.append(f"| unseen | not run yet (`make unseen`) | {NONE} |")
     out += [
         "",
         "Each artifact lives in `data/<stage>/<version>/`; its `manifest.json` holds the full "
@@ -1385,6 +1455,7 @@ def render_readme(version: str, upstream: dict[str, tuple[str, dict]], tables: d
     pr_figure = "figures/pr_curve.png"
     out += render_train(trained, tables, pr_figure if pr_figure in figures else None)
     out += render_baseline(baseline, tables, figures)
+    out += render_unseen(unseen, tables)
     out += render_evaluate(evaluated, tables)
     out += render_ablation(ablation, tables)
     out += render_robustness(robustness, tables,
@@ -1470,6 +1541,7 @@ def report(cfg: DictConfig) -> Path:
     evaluated = resolve_evaluate(root, str(cfg.report.evaluate_version))
     robustness = resolve_robustness(root, str(cfg.report.robustness_version))
     ablated = resolve_ablation(root, str(cfg.report.ablation_version))
+    unseen = resolve_unseen(root, str(cfg.report.unseen_version))
     robust_gen = robustness_generation(root, robustness) if robustness is not None else None
     config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
     if robustness is not None:
@@ -1492,6 +1564,8 @@ def report(cfg: DictConfig) -> Path:
         upstream["robustness"] = robustness.version
     if ablated is not None:
         upstream["ablation"] = ablated[0].name
+    if unseen is not None:
+        upstream["unseen"] = unseen[0].name
     version = compute_version(STAGE, config, upstream)
     gen_cfg = gen_manifest.get("config", {})
 
@@ -1520,6 +1594,9 @@ def report(cfg: DictConfig) -> Path:
                 tables[t.name] = t
         if ablated is not None:
             tables["ablation"] = ablation_table(ablated[1])
+        if unseen is not None:
+            for t in (unseen_table1(unseen[1]), unseen_table2(unseen[1])):
+                tables[t.name] = t
         if robustness is not None:
             for t in (robustness_sensor_table(robustness), robustness_table1_table(robustness),
                       robustness_table2_table(robustness),
@@ -1617,9 +1694,11 @@ def report(cfg: DictConfig) -> Path:
             used["robustness"] = (robustness.version, robustness.manifest)
         if ablated is not None:
             used["ablation"] = (ablated[0].name, load_manifest(ablated[0]))
+        if unseen is not None:
+            used["unseen"] = (unseen[0].name, load_manifest(unseen[0]))
         readme = render_readme(run.version, used, tables, figures, gen_cfg, stats, labels,
                                trained, baseline, evaluated, robustness, robustness_note,
-                               ablated)
+                               ablated, unseen)
         (run.work_dir / "README.md").write_text(readme)
 
         with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version) as log:
@@ -1643,6 +1722,7 @@ def report(cfg: DictConfig) -> Path:
             "baseline_version": baseline.version if baseline is not None else None,
             "evaluate_version": evaluated.version if evaluated is not None else None,
             "robustness_version": robustness.version if robustness is not None else None,
+            "unseen_version": unseen[0].name if unseen is not None else None,
             "volatile_files": sorted(f for f in VOLATILE_FILES if (run.work_dir / f).is_file()),
             "scenes": dict(stats.scenes),
             "boxes": dict(stats.boxes),

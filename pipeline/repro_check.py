@@ -26,7 +26,8 @@ from pipeline.tracking import rrd_equal
 from pipeline.view import MODEL_STAGES
 
 # The smoke pipeline, in order; later issues append their stages here.
-STAGES = ("generate", "label", "train", "baseline", "evaluate", "ablation", "robustness", "report")
+STAGES = ("generate", "label", "train", "baseline", "evaluate", "unseen", "ablation", "robustness",
+          "report")
 
 
 

@@ -51,6 +51,8 @@ from omegaconf import DictConfig, OmegaConf
 
 from pipeline.artifacts import compute_version, run_stage, stage_config
 from pipeline.artifacts.csvfile import write_rows
+from pipeline.artifacts.jsonfile import json_safe, write_json
+from pipeline.artifacts.stages import run_named_stage
 from pipeline.artifacts.store import StageRun
 from pipeline.cli import (
     CONF_DIR, compose, data_root, own_overrides, scale_overrides, stage_main,
@@ -61,12 +63,6 @@ STAGE = "robustness"
 SECTIONS = ("seed", "robustness")
 NOT_AFFECTING_RESULT = ("robustness.force",)
 IDEAL, SENSOR = "ideal", "sensor"  # Table inputs; "sensor+<filter>": sensor depth, then a filter
-
-
-def _dir_name(path: Path | None) -> str:
-    if path is None:
-        raise RuntimeError("a stage returned no artifact (a non-zero torchrun rank?)")
-    return Path(path).name
 
 
 class Pipelines:
@@ -91,12 +87,8 @@ class Pipelines:
         return keep_latest(self.stage_dirs.values())
 
     def _run(self, key: str, stage: str, extra: list[str]) -> Path:
-        import importlib
-
-        fn = getattr(importlib.import_module(f"pipeline.{stage}"), stage)
-        print(f"[{STAGE}] {key}: {stage} {' '.join(self.base + extra)}", flush=True)
-        out = Path(fn(compose(stage, self.base + extra)))
-        self.versions[key], self.dirs[key] = _dir_name(out), out
+        out = run_named_stage(stage, self.base + extra, f"{STAGE}: {key}")
+        self.versions[key], self.dirs[key] = out.name, out
         return out
 
     def build(self) -> None:
@@ -216,20 +208,9 @@ def closed_loop_rows(p: Pipelines, group: str, variants, trials: int) -> list[di
     return rows
 
 
-def _json_safe(obj):
-    """NaN and ±inf (e.g. the success rate of a variant with no attempt) → None (JSON null)."""
-    if isinstance(obj, float):
-        return obj if np.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: _json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_json_safe(v) for v in obj]
-    return obj
-
-
 def _log(log: StageLog, p: Pipelines, picks: dict, count: int, tables: dict) -> None:
     """Sample test images (ideal, sensor, filtered) with each planner's G_opt, and the tables."""
-    from pipeline.baseline import _pixels_to_points
+    from pipeline.dataset.pixels import pixels_to_points
     from pipeline.dataset.scenes import SceneDataset
 
     scenes = SceneDataset(p.dirs["generate_noisy"], "test")
@@ -244,7 +225,7 @@ def _log(log: StageLog, p: Pipelines, picks: dict, count: int, tables: dict) -> 
             log.log_depth(f"{ent}/depth", depth_getter(name)(scene))
             for planner, uv in picks[name].items():
                 if i < len(uv) and np.isfinite(uv[i]).all():
-                    log.log_points(f"{ent}/g_opt/{planner}", _pixels_to_points(scene, uv[i]),
+                    log.log_points(f"{ent}/g_opt/{planner}", pixels_to_points(scene, uv[i]),
                                    np.asarray([colors.get(planner, [255, 255, 255])], np.uint8))
         lost = float(np.mean((scene.depth_m == 0) & (scene.depth_clean_m > 0)))
         log.log_scalar("sensor/missing_fraction", lost)
@@ -295,9 +276,8 @@ def robustness(cfg: DictConfig, overrides: list[str] | None = None) -> Path:
                   "sensor": OmegaConf.to_container(
                       compose("generate", base + [f"sensor={rc.sensor}"]).sensor, resolve=True),
                   "depth_filters": filters, "artifacts": upstream}
-        tables = _json_safe(tables)
-        (run.work_dir / "robustness.json").write_text(
-            json.dumps(tables, indent=1, allow_nan=False) + "\n")
+        tables = json_safe(tables)
+        write_json(run.work_dir / "robustness.json", tables)
         run.metrics.update({k: tables[k] for k in ("table1", "table2", "closed_loop")})
         with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version) as log:
             _log(log, p, picks, int(rc.log_images), tables)

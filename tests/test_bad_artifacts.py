@@ -133,7 +133,7 @@ VERSION_KEYS = [
     "evaluate.train_version", "evaluate.baseline_version",
     "report.generate_version", "report.label_version", "report.train_version",
     "report.baseline_version", "report.evaluate_version", "report.robustness_version",
-    "report.ablation_version",
+    "report.ablation_version", "report.unseen_version",
 ]
 
 

@@ -416,6 +416,16 @@ class RobustnessConfig:
 
 
 @dataclass
+class UnseenConfig:
+    """The unseen-size test set (``pipeline.unseen``): Tables 1 and 2 on heaps of other boxes."""
+
+    boxes: str = "unseen"  # a file of conf/boxes/ (the heaps' box sizes)
+    test_scenes: int = 300
+    log_images: int = 4
+    force: bool = False
+
+
+@dataclass
 class AblationVariant:
     """One closed-loop run of the ablation: a name and its evaluate-stage overrides."""
 
@@ -445,6 +455,7 @@ class ReportConfig:
     # no robustness artifact at all: the report leaves the robustness section out
     robustness_version: str = "latest"
     ablation_version: str = "latest"  # no ablation artifact at all: the report leaves it out
+    unseen_version: str = "latest"  # no unseen-size artifact at all: the report leaves it out
     num_sample_images: int = 6
     force: bool = False
 
@@ -505,6 +516,7 @@ class PipelineConfig:
     evaluate: EvaluateConfig = field(default_factory=EvaluateConfig)
     robustness: RobustnessConfig = field(default_factory=RobustnessConfig)
     ablation: AblationConfig = field(default_factory=AblationConfig)
+    unseen: UnseenConfig = field(default_factory=UnseenConfig)
     eval_boxes: BoxesConfig = field(default_factory=BoxesConfig)
     logging: LoggingConfig = field(default_factory=LoggingConfig)
     executor: ExecutorConfig = field(default_factory=ExecutorConfig)

@@ -46,7 +46,6 @@ bin; attempts until the bin is empty, the planner finds no grasp at home, one bo
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 from dataclasses import dataclass, field

@@ -1,0 +1,187 @@
+"""Unseen box sizes: Tables 1 and 2 on heaps of boxes the network never saw in training.
+
+    python -m pipeline.unseen [experiment=default] [unseen.boxes=unseen]
+
+The paper trains on three box sizes (Sec. 4.3) and claims the planner generalises to the 12 box
+types of its experiments (Fig. 8). This stage measures that claim on the planner's own tables.
+It runs, or reuses when their versions exist, with the command's own overrides:
+
+* the ``make reproduce`` pipeline's ``generate`` → ``label`` → ``train`` and ``baseline`` (the
+  trained network and the Dex-Net-style GQ-CNN, both trained on the three training sizes);
+* ``generate boxes=<unseen.boxes>`` with a test split only (``unseen.test_scenes`` heaps; no
+  training or validation scenes) and its ``label`` artifact;
+
+then measures on that unseen-size test split:
+
+* **Table 1** (``pipeline.planner.evaluate``, the model's calibrated th) of the trained network;
+* **Table 2** (``pipeline.baseline``'s measure: G_opt less than 30 px from a true face centre) of
+  the trained network and the Dex-Net-style planners.
+
+The seen-size figures (the same tables on the training sizes' test split) are read from the
+train and baseline manifests, so the report shows both side by side.
+
+Artifact (``data/unseen/<version>/``)::
+
+    table1.csv         set (seen | unseen), Top 1, Top 1 %, Top 5 %, Top 10 % (pooled and per
+                       image), predictions, scored images, images with no prediction
+    table2.csv         set, planner, images, no grasp, within 30 px, median distance
+    unseen.json        all of it, with the versions of every artifact used
+    log.rrd, log.mcap  sample unseen-size test images with each planner's G_opt
+
+The unseen-size generation and label artifacts never become ``latest``: it keeps naming the
+ordinary pipeline's (``keep_latest``).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import hydra
+import numpy as np
+from omegaconf import DictConfig
+
+from pipeline.artifacts import compute_version, load_manifest, run_stage, stage_config
+from pipeline.artifacts.csvfile import write_rows
+from pipeline.artifacts.jsonfile import json_safe, write_json
+from pipeline.artifacts.pointers import keep_latest
+from pipeline.artifacts.stages import run_named_stage
+from pipeline.artifacts.store import StageRun
+from pipeline.cli import CONF_DIR, compose, data_root, own_overrides, scale_overrides, stage_main
+from pipeline.tracking import StageLog
+
+STAGE = "unseen"
+SECTIONS = ("seed", "unseen")
+NOT_AFFECTING_RESULT = ("unseen.force", "unseen.log_images")
+TABLE1_KEYS = ("top1", "top1pct", "top5pct", "top10pct")
+PLANNER_COLORS = {"dcnn": (40, 200, 40), "gqcnn": (200, 40, 40), "planarity": (120, 120, 255)}
+
+
+def build(base: list[str], uc, data: Path, models: Path) -> dict[str, Path]:
+    """Run (or reuse) every artifact the study needs; name → folder."""
+    if int(uc.test_scenes) < 1:
+        raise ValueError(f"unseen.test_scenes={uc.test_scenes}: the unseen-size test split "
+                         "needs at least one heap")
+    boxes_file = Path(CONF_DIR) / "boxes" / f"{uc.boxes}.yaml"
+    if not boxes_file.is_file():
+        choices = sorted(p.stem for p in boxes_file.parent.glob("*.yaml"))
+        raise ValueError(f"unseen.boxes={uc.boxes!r} is not a file of conf/boxes/: choose one "
+                         f"of {choices}")
+    dirs: dict[str, Path] = {}
+
+    def run(key: str, stage: str, extra: list[str]) -> Path:
+        dirs[key] = run_named_stage(stage, base + extra, f"{STAGE}: {key}")
+        return dirs[key]
+
+    # The ordinary pipeline first (its runs may point ``latest`` at themselves, as
+    # ``make reproduce`` does); then the unseen heaps, which must not.
+    gen = run("generate_seen", "generate", [])
+    lab = run("label_seen", "label", [f"label.generate_version={gen.name}"])
+    trained = run("train", "train", [f"train.label_version={lab.name}"])
+    run("baseline", "baseline", [f"baseline.generate_version={gen.name}",
+                                 f"baseline.train_version={trained.name}"])
+    with keep_latest([data / "generate", data / "label"]):
+        gen_u = run("generate_unseen", "generate", [
+            f"boxes={uc.boxes}", "generate.num_scenes=0", "generate.num_val_scenes=0",
+            f"generate.num_test_scenes={int(uc.test_scenes)}"])
+        run("label_unseen", "label", [f"label.generate_version={gen_u.name}"])
+    return dirs
+
+
+def table1_row(name: str, res: dict) -> dict:
+    """One Table 1 row (fractions, 6 decimals) of a ``precision_table`` result."""
+    def r6(v):
+        return None if v is None else round(float(v), 6)
+    return {"set": name, **{k: r6(res.get(k)) for k in TABLE1_KEYS},
+            **{f"per_image_{k}": r6((res.get("per_image") or {}).get(k))
+               for k in TABLE1_KEYS[1:]},
+            "threshold": res.get("threshold"), "predictions": res.get("num_predictions"),
+            "scored_images": res.get("scored_images"),
+            "no_prediction_images": res.get("no_prediction_images")}
+
+
+def unseen_tables(cfg, dirs: dict[str, Path], progress: bool) -> tuple[list, list, dict]:
+    """Table 1 and Table 2 rows (seen from the manifests, unseen measured here) and each
+    planner's G_opt on the unseen test images."""
+    from pipeline import baseline as bl
+    from pipeline.label import LabelSet
+    from pipeline.planner.data import GraspDataset
+    from pipeline.planner.planner import Planner
+    from pipeline.train import table1
+
+    base = scale_overrides(cfg, None)
+    radius_t1 = float(compose("train", base).train.match_radius_px)
+    planner = Planner.load(dirs["train"])
+    data = GraspDataset(dirs["generate_unseen"], LabelSet(dirs["label_unseen"], "test"), "test",
+                        planner.norm, planner.net.cfg.grid)
+    seen_t1 = load_manifest(dirs["train"])["metrics"]["table1"]
+    t1 = [table1_row("seen", seen_t1),
+          table1_row("unseen", table1(planner, data, radius_t1))]
+
+    bcfg = compose("baseline", base)
+    radius = float(bcfg.baseline.table2_radius_px)
+    res = bl.evaluate_table2(bcfg, dirs["generate_unseen"], dirs["baseline"], dirs["train"],
+                             progress)
+    seen_rows = load_manifest(dirs["baseline"])["metrics"]["table2"]["rows"]
+    t2 = [{"set": "seen", **r} for r in seen_rows]
+    t2 += [{"set": "unseen", **r} for r in bl.table2_rows(res, radius, np.array([radius]))[0]]
+    picks = {k: res[f"{k}_uv"] for k in res["planners"]}
+    return t1, t2, picks
+
+
+def _log(log: StageLog, gen_dir: Path, picks: dict, count: int, tables: dict) -> None:
+    """Sample unseen-size test images with each planner's G_opt, and the tables."""
+    from pipeline.dataset.pixels import pixels_to_points
+    from pipeline.dataset.scenes import SceneDataset
+
+    scenes = SceneDataset(gen_dir, "test")
+    for i in range(min(count, len(scenes))):
+        scene = scenes[i]
+        log.set_time(sequences={"test_image": i}, clock_ns=i * 1_000_000_000)
+        log.log_camera("unseen/camera", scene.intrinsics, scene.T_world_cam)
+        log.log_depth("unseen/camera/depth", scene.depth_clean_m)
+        for planner, uv in picks.items():
+            if i < len(uv) and np.isfinite(uv[i]).all():
+                color = np.asarray([PLANNER_COLORS.get(planner, (255, 255, 255))], np.uint8)
+                log.log_points(f"unseen/camera/g_opt/{planner}",
+                               pixels_to_points(scene, uv[i]), color)
+        log.log_text("log", f"unseen test image {i}: {len(scene.boxes)} boxes")
+    for key in ("table1", "table2"):
+        for row in tables[key]:
+            log.log_text("log", f"{key}: " + json.dumps(row))
+
+
+def unseen(cfg: DictConfig, overrides: list[str] | None = None) -> Path:
+    """Run the unseen-size study; returns its artifact folder. ``overrides``: passed to every
+    stage it runs (the command line's own, by default none)."""
+    uc = cfg.unseen
+    base = scale_overrides(cfg, overrides)
+    dirs = build(base, uc, data_root(cfg), Path(cfg.paths.models))
+    upstream = {k: v.name for k, v in sorted(dirs.items())}
+    config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
+    version = compute_version(STAGE, config, upstream)
+
+    def body(run: StageRun) -> None:
+        t1, t2, picks = unseen_tables(cfg, dirs, bool(cfg.logging.progress))
+        write_rows(run.work_dir / "table1.csv", t1)
+        write_rows(run.work_dir / "table2.csv", t2)
+        boxes = compose("generate", base + [f"boxes={uc.boxes}"]).boxes
+        tables = json_safe({"table1": t1, "table2": t2, "artifacts": upstream,
+                            "boxes": [{"name": str(b.name), "size": [float(x) for x in b.size]}
+                                      for b in boxes.types]})
+        write_json(run.work_dir / "unseen.json", tables)
+        run.metrics.update({k: tables[k] for k in ("table1", "table2", "boxes")})
+        with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version) as log:
+            _log(log, dirs["generate_unseen"], picks, int(uc.log_images), tables)
+
+    return run_stage(data_root(cfg), STAGE, version, config, upstream, body,
+                     seed=int(cfg.seed), force=bool(uc.force))
+
+
+@hydra.main(config_path=CONF_DIR, config_name="unseen", version_base="1.3")
+def main(cfg: DictConfig) -> None:
+    stage_main(lambda c: unseen(c, own_overrides("unseen")))(cfg)
+
+
+if __name__ == "__main__":
+    main()

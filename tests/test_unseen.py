@@ -1,0 +1,75 @@
+"""The unseen-size test set (pipeline/unseen.py): no training size among its boxes, bad input
+refused before any work, and a smoke run end to end (seen rows from the manifests, unseen rows
+measured, ``latest`` left where it was, the report's section)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from pipeline.cli import compose
+
+
+def _base(tmp_path):
+    return ["experiment=smoke", f"paths.root={tmp_path}", "logging.progress=false",
+            "generate.num_scenes=4", "generate.num_val_scenes=2", "generate.num_test_scenes=2",
+            "generate.scenes_per_shard=4", "label.robot_checks=false", "baseline.epochs=1"]
+
+
+def test_unseen_boxes_are_none_of_the_training_sizes():
+    cfg = compose("generate", ["boxes=unseen"])
+    train = compose("generate", []).boxes
+    seen = {tuple(sorted(b.size)) for b in train.types}
+    unseen = [tuple(sorted(b.size)) for b in cfg.boxes.types]
+    assert len(unseen) >= 7 and not seen & set(unseen)
+    names = [b.name for b in cfg.boxes.types]
+    assert len(set(names)) == len(names)
+
+
+def test_bad_input_is_refused_before_any_work(tmp_path):
+    from pipeline.unseen import unseen
+
+    with pytest.raises(ValueError, match="conf/boxes"):
+        unseen(compose("unseen", _base(tmp_path) + ["unseen.boxes=nowhere"]))
+    with pytest.raises(ValueError, match="test_scenes"):
+        unseen(compose("unseen", _base(tmp_path) + ["unseen.test_scenes=0"]))
+    assert not (tmp_path / "data").exists()
+
+
+@pytest.mark.slow
+def test_smoke_unseen_end_to_end(tmp_path):
+    from pipeline.artifacts import load_manifest
+    from pipeline.report import UNSEEN_SECTION, report
+    from pipeline.unseen import unseen
+
+    base = _base(tmp_path)
+    cfg = compose("unseen", base)
+    out = unseen(cfg, base)
+    data = json.loads((out / "unseen.json").read_text())
+    manifest = load_manifest(out)
+    up = manifest["upstream"]
+    # the unseen heaps: a test split only, of the unseen boxes
+    gen_u = load_manifest(tmp_path / "data" / "generate" / up["generate_unseen"])
+    assert gen_u["config"]["boxes"]["name"] == "unseen"
+    assert gen_u["config"]["generate"]["num_scenes"] == 0
+    # ``latest`` names the ordinary (seen-size) pipeline, not the unseen heaps
+    assert (tmp_path / "data" / "generate" / "latest").resolve().name == up["generate_seen"]
+    # Table 1: the seen row is the train manifest's, the unseen row is measured at the same th
+    t1 = {r["set"]: r for r in data["table1"]}
+    train_t1 = load_manifest(tmp_path / "models" / "train" / up["train"])["metrics"]["table1"]
+    assert t1["seen"]["top1"] == (None if train_t1["top1"] is None
+                                  else round(train_t1["top1"], 6))
+    assert t1["unseen"]["threshold"] == train_t1["threshold"]
+    assert t1["unseen"]["scored_images"] <= 2
+    # Table 2: every planner on both sets
+    sets = {(r["set"], r["planner"]) for r in data["table2"]}
+    assert {p for s, p in sets if s == "seen"} == {p for s, p in sets if s == "unseen"}
+    assert all(r["images"] <= 2 for r in data["table2"] if r["set"] == "unseen")
+    for name in ("table1.csv", "table2.csv", "log.rrd", "log.mcap"):
+        assert (out / name).is_file()
+    assert unseen(cfg, base) == out  # reused
+    report(compose("report", base))
+    readme = (tmp_path / "reports" / "README.md").read_text()
+    assert f"## {UNSEEN_SECTION}" in readme and out.name in readme
+    assert (tmp_path / "reports" / "tables" / "unseen_table2.csv").is_file()
