@@ -666,12 +666,13 @@ def render_train(trained: TrainInfo | None, tables: dict[str, Table],
                else "fixed by `train.threshold`")
         out += [
             f"**Threshold th = {float(thr['value']):g}** ({how}; `pipeline/planner/"
-            "calibration.py`): the grid value whose optimal grasp point G_opt (the first "
-            "candidate of Eq. 7's ranking above th) has a label point of its class within "
-            f"{float(radius):g} px on the most validation images that have a graspable point "
-            "(nothing above th: a miss); ties go to the lowest th. The same th is stored in the "
-            "model and used by Table 2, the closed loop and the robustness study. The validation "
-            "curve (precision, recall and F1 pool every prediction above th):",
+            "calibration.py`): the grid value with the largest F1 of the planner's detections "
+            "above th on the validation split (matched to label points of the same class within "
+            f"{float(radius):g} px, as in Table 1; precision and recall pooled over the split); "
+            "ties go to the lowest th. The same th is stored in the model and used by Table 2, "
+            "the closed loop and the robustness study. The validation curve (*G_opt correct*: "
+            "the share of validation images with a graspable point whose first Eq. 7 candidate "
+            "has a label point of its class that near; *no candidate*: nothing above th):",
             "",
             tables["threshold_calibration"].markdown(),
         ]

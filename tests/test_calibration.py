@@ -48,21 +48,26 @@ def test_gopt_correct_by_hand():
 
 def test_threshold_curve_and_choice_by_hand():
     curve = threshold_curve([A, B_, C], [0.1, 0.25, 0.5, 0.7], 16.0)
-    acc = [r["gopt_accuracy"] for r in curve]
-    # th 0.1: A wrong, B right → 1/2; 0.25: A right, B right → 1; 0.5: A right, B none → 1/2;
-    # 0.7: neither → 0.
-    assert acc == [0.5, 1.0, 0.5, 0.0]
+    # G_opt over the scored images A and B: th 0.1: A wrong, B right → 1/2; 0.25: both right →
+    # 1; 0.5: A right, B none → 1/2; 0.7: neither → 0.
+    assert [r["gopt_accuracy"] for r in curve] == [0.5, 1.0, 0.5, 0.0]
     assert [r["no_candidate"] for r in curve] == [0.0, 0.0, 0.5, 1.0]
     assert all(r["scored_images"] == 2 for r in curve)
-    # Detections at th 0.1 (A: R ✗, L ✓; B: B ✓): precision 2/3, recall 2/2, F1 0.8.
-    assert curve[0]["precision"] == pytest.approx(2 / 3)
-    assert curve[0]["recall"] == 1.0 and curve[0]["f1"] == pytest.approx(0.8)
-    # th 0.5: only A's L, correct: precision 1, recall 1/2.
-    assert curve[2]["precision"] == 1.0 and curve[2]["recall"] == 0.5
+    # Detections on every image (C's L at 0.9 has no graspable truth: always wrong); 2 graspable
+    # label points (A's L, B's B).
+    #   th 0.1: A R ✗, A L ✓, B ✓, C ✗ → P 2/4, R 2/2, F1 2/3
+    #   th 0.25: A L ✓, B ✓, C ✗ → P 2/3, R 1, F1 0.8
+    #   th 0.5: A L ✓, C ✗ → P 1/2, R 1/2, F1 1/2
+    #   th 0.7: C ✗ → P 0, R 0, F1 0
+    assert [r["precision"] for r in curve] == pytest.approx([0.5, 2 / 3, 0.5, 0.0])
+    assert [r["recall"] for r in curve] == pytest.approx([1.0, 1.0, 0.5, 0.0])
+    assert [r["f1"] for r in curve] == pytest.approx([2 / 3, 0.8, 0.5, 0.0])
     assert choose_threshold(curve) == 0.25
-    # Equal accuracies: the lowest th wins.
-    tie = [dict(r, gopt_accuracy=0.5) for r in curve]
+    # Equal F1: the lowest th wins.
+    tie = [dict(r, f1=0.5) for r in curve]
     assert choose_threshold(tie) == 0.1
+    # Nothing above th anywhere: precision has no denominator.
+    assert threshold_curve([A], [0.9], 16.0)[0]["precision"] is None
 
 
 def test_choice_needs_a_scored_image():

@@ -5,21 +5,25 @@ probabilities are low, so a fixed th = 0.5 leaves many images without any candid
 training stage therefore chooses th on the *validation* split by this rule and stores it in
 ``model.pt``; Table 1, Table 2, the closed loop and the robustness study all read it from there.
 
-**Rule.** For each th on ``grid`` (ascending), the planner's optimal grasp point G_opt (the first
-candidate of Eq. 7's ranking among the cells with S = max_c p(c) > th and a class other than NG,
-``pipeline.planner.ranking``) is scored on every validation image that has at least one
-graspable (R, L or B) label point:
+**Rule.** For each th on ``grid`` (ascending), every candidate the planner returns on a
+validation image (a cell with S = max_c p(c) > th, a class other than NG and depth data at its
+point) is a detection. Detections are matched to the
+image's label points as in Table 1 (``pipeline.planner.evaluate.match_image``: in descending S,
+a detection is correct when a not yet matched label point of the *same class* lies within
+``radius_px`` pixels). Pooled over every validation image (one without a graspable label point
+contributes only wrong detections), precision = correct / detections and
+recall = correct / graspable (R, L or B) label points. th is the grid value with the largest
+F1 = 2 P R / (P + R); among equal F1 the lowest th.
 
-* **correct**: a label point of the *same class* lies within ``radius_px`` pixels of G_opt;
-* an image where nothing clears th is a miss.
-
-th is the grid value with the largest share of correct G_opt; among equal shares the lowest th
-(it keeps more candidates for the closed loop's run-time check to walk). This is the quantity
-the planner exists for: the grasp it proposes first, on images where a grasp exists.
+F1 weighs the two ways a threshold fails the planner: too low, the list is full of wrong points
+(precision); too high, the planner proposes nothing for faces that are graspable (recall, and
+images with no candidate at all).
 
 The curve stored beside the choice also gives, for each th, the share of images with no
-candidate and the pooled precision, recall and F1 of all detections above th (matched as in
-Table 1, ``pipeline.planner.evaluate.match_image``).
+candidate and the share whose optimal grasp point G_opt (the first candidate of Eq. 7's
+ranking among the detections, ``pipeline.planner.ranking``) has a label point of its class
+within ``radius_px`` (an image with nothing above th counting as a miss), over the validation
+images that have a graspable label point.
 
 **Why G_opt at th is a prefix scan.** With the paper's ranking policy a candidate's J (Eq. 7)
 does not depend on the other candidates, so the ranked list at a higher th is the ranked list at
@@ -79,17 +83,18 @@ def gopt_correct(img: RankedImage, threshold: float, radius_px: float) -> bool |
 def threshold_curve(images: list[RankedImage], grid: list[float], radius_px: float) -> list[dict]:
     """One row per th of ``grid``: ``threshold``, ``gopt_accuracy`` (share of scored images whose
     G_opt is correct), ``no_candidate`` (share of scored images with nothing above th),
-    ``precision``, ``recall``, ``f1`` (pooled detections above th), ``scored_images``; None where
+    ``precision``, ``recall``, ``f1`` (pooled detections above th on every image),
+    ``scored_images`` (images with a graspable label point); None where
     a share has no denominator (no scored image, nothing above th)."""
     scored = [img for img in images if has_graspable(img.gt_classes)]
-    num_gt = sum(int(np.sum(np.asarray(img.gt_classes) != GraspClass.NG)) for img in scored)
+    num_gt = sum(int(np.sum(np.asarray(img.gt_classes) != GraspClass.NG)) for img in images)
     rows = []
     for th in grid:
         th = float(th)
         correct = [gopt_correct(img, th, radius_px) for img in scored]
         empty = [not np.any(np.asarray(img.probabilities) > th) for img in scored]
         hits = taken = 0
-        for img in scored:
+        for img in images:
             probs = np.asarray(img.probabilities, np.float64).reshape(-1)
             sel = probs > th
             if not sel.any():
@@ -114,10 +119,9 @@ def threshold_curve(images: list[RankedImage], grid: list[float], radius_px: flo
 
 
 def choose_threshold(curve: list[dict]) -> float:
-    """th of the row with the largest ``gopt_accuracy``; among equal ones the lowest th."""
-    valid = [r for r in curve if r["gopt_accuracy"] is not None]
-    if not valid:
+    """th of the row with the largest ``f1``; among equal ones the lowest th."""
+    if not any(r["recall"] is not None for r in curve):
         raise ValueError("threshold calibration has no validation image with a graspable label "
                          "point: generate more validation scenes (generate.num_val_scenes)")
-    best = max(r["gopt_accuracy"] for r in valid)
-    return min(r["threshold"] for r in valid if r["gopt_accuracy"] == best)
+    best = max(r["f1"] for r in curve)
+    return min(r["threshold"] for r in curve if r["f1"] == best)
