@@ -305,7 +305,8 @@ def bench_scenes(cfg, num_images: int) -> list:
 
 
 def planning_times(cfg, num_images: int = 8, repeats: int = 3) -> dict[str, float]:
-    """Median planning time per image (network + decoding + ranking, CPU, 2 threads).
+    """Median planning time per image (network + decoding + ranking, CPU, 2 threads; the
+    ``default`` network on 1 thread too).
 
     For the ``default`` network: the trained planner of ``models/train/latest`` when it exists
     (so the number of ranked candidates is real), otherwise an untrained one of the same width.
@@ -332,17 +333,23 @@ def planning_times(cfg, num_images: int = 8, repeats: int = 3) -> dict[str, floa
             rk = ranking_config(full, min(full.train.threshold_grid))
             planner = Planner(net, Normalisation(rk.d_ground, 0.1, 0.5), rk)
             label = "untrained"
-        planner.plan(scenes[0].depth_m, intr)  # warm-up
-        times, counts = [], []
-        for _ in range(1 if name == "paper" else repeats):
-            for sc in scenes[: 3 if name == "paper" else num_images]:
-                t0 = time.perf_counter()
-                counts.append(len(planner.plan(sc.depth_m, intr)))
-                times.append(time.perf_counter() - t0)
-        out[f"plan_{name}_ms"] = 1000 * float(np.median(times))
-        out[f"plan_{name}_candidates"] = float(np.mean(counts))
-        print(f"planning, {name} network (width {full.model.width}, {label}): "
-              f"{out[f'plan_{name}_ms']:.1f} ms/image, {np.mean(counts):.1f} candidates ranked")
+        # the default network also on one thread: the paper's planning-time comparison point
+        for threads in ((2, 1) if name == "default" else (2,)):
+            torch.set_num_threads(threads)
+            planner.plan(scenes[0].depth_m, intr)  # warm-up
+            times, counts = [], []
+            for _ in range(1 if name == "paper" else repeats):
+                for sc in scenes[: 3 if name == "paper" else num_images]:
+                    t0 = time.perf_counter()
+                    counts.append(len(planner.plan(sc.depth_m, intr)))
+                    times.append(time.perf_counter() - t0)
+            key = f"plan_{name}" + ("" if threads == 2 else f"_{threads}thread")
+            out[f"{key}_ms"] = 1000 * float(np.median(times))
+            out[f"{key}_candidates"] = float(np.mean(counts))
+            print(f"planning, {name} network (width {full.model.width}, {label}), {threads} "
+                  f"thread{'s' if threads > 1 else ''}: {out[f'{key}_ms']:.1f} ms/image, "
+                  f"{np.mean(counts):.1f} candidates ranked")
+        torch.set_num_threads(2)
     return out
 
 
