@@ -4,7 +4,7 @@
 
 Dex-Net's weights and datasets cannot be downloaded here, so the comparison planner is built
 the way Dex-Net 3.0/4.0 build theirs, on this project's own simulated heaps
-(``pipeline.dexnet``; README "The Dex-Net-style baseline"):
+(``pipeline.dexnet``; docs/baseline.md):
 
 1. **Candidate labels** (scene-parallel, like labelling): on every train / val / test scene of
    the generation artifact, ``baseline.candidates_per_scene`` suction candidates are sampled

@@ -371,12 +371,13 @@ def _training_memory_child(experiment: str, root: str | None, steps: int, loader
 
     from pipeline.artifacts import load_manifest, resolve_artifact
     from pipeline.cli import compose, data_root
-    from pipeline.label import LabelSet
+    from pipeline.dataset.labels import LabelSet
     from pipeline.planner.data import GraspDataset, make_loader
     from pipeline.planner.distributed import DistContext
     from pipeline.planner.loss import LossConfig, grasp_loss
     from pipeline.planner.network import GraspNet
-    from pipeline.train import _epoch_batches, network_config, normalisation
+    from pipeline.planner.data import epoch_batches, normalisation
+    from pipeline.planner.network import network_config
 
     overrides = [f"experiment={experiment}"] + ([f"paths.root={root}"] if root else [])
     overrides += [f"model.width={width}"] if width is not None else []
@@ -398,7 +399,7 @@ def _training_memory_child(experiment: str, root: str | None, steps: int, loader
     out["images"] = sum(len(d) for d in sets.values())
     out["in_memory_depth_mb"] = out["images"] * h * w * 2 / 2**20
     batch = int(cfg.train.batch_size)
-    batches, _ = _epoch_batches(len(train), batch, int(cfg.seed), 0, "none", DistContext())
+    batches, _ = epoch_batches(len(train), batch, int(cfg.seed), 0, "none", DistContext())
     t0 = time.perf_counter()
     for x, _targets in make_loader(train, batches, loader_workers):
         pass
@@ -774,14 +775,16 @@ def main(argv: list[str] | None = None) -> int:
           f"{results['label_robot_ms_per_scene']:.1f} ms robot checks")
     results.update(planning_times(cfg))
     width = float(compose("train", ["experiment=default"]).model.width)
-    results["train_default_images_per_s"] = training_images_per_s(width)
-    results["train_default_channels_last_images_per_s"] = training_images_per_s(
-        width, channels_last=True)
-    contiguous = results["train_default_images_per_s"]
-    channels_last = results["train_default_channels_last_images_per_s"]
+    # the default network in both layouts, and the one twice as wide, in the same run
+    for key, w, last in (("default", width, False), ("default_channels_last", width, True),
+                         ("wide_channels_last", 2 * width, True)):
+        results[f"train_{key}_images_per_s"] = training_images_per_s(w, channels_last=last)
+    contiguous, channels_last, wide = (results[f"train_{k}_images_per_s"] for k in
+                                       ("default", "default_channels_last", "wide_channels_last"))
     print(f"training, default network (width {width}), batch 16: {contiguous:.1f} images/s "
           f"contiguous, {channels_last:.1f} images/s channels_last "
-          f"({channels_last / contiguous:.2f}x, same run)")
+          f"({channels_last / contiguous:.2f}x, same run); width {2 * width}, channels_last: "
+          f"{wide:.1f} images/s ({wide / channels_last:.2f}x the default's)")
     results["label_vs_generate_1w"] = results["label_1w_scenes_per_s"] / one
     print(f"labelling / generation, per process:    {results['label_vs_generate_1w']:.2f} "
           "(target >= 1: labelling is not the bottleneck)")

@@ -209,7 +209,7 @@ def _log_trials(log: StageLog, results: list[TrialResult], intr) -> None:
     image (half resolution, under a camera of half-resolution intrinsics) with G_opt."""
     from types import SimpleNamespace
 
-    from pipeline.label import _quat_from_axes
+    from pipeline.camera.geometry import quat_from_axes
 
     half = SimpleNamespace(width=intr.width // 2, height=intr.height // 2, fx=intr.fx / 2,
                            fy=intr.fy / 2, cx=(intr.cx + 0.5) / 2 - 0.5,
@@ -240,7 +240,7 @@ def _log_trials(log: StageLog, results: list[TrialResult], intr) -> None:
             f = s["surface"]
             log.log_points(f"{prefix}/camera/g_prime", f.center_cam.reshape(1, 3),
                            np.array([[255, 220, 0]], np.uint8))
-            q = _quat_from_axes(f.long_axis_cam, f.short_axis_cam, f.normal_cam)
+            q = quat_from_axes(f.long_axis_cam, f.short_axis_cam, f.normal_cam)
             log.log_boxes(f"{prefix}/camera/surface", f.center_cam.reshape(1, 3),
                           np.array([[f.long_length, f.short_length, 0.001]]), q.reshape(1, 4),
                           labels=[f"attempt {s['attempt']}"], frame_id="camera")

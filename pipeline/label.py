@@ -21,7 +21,7 @@ Detected surfaces are also matched against the true visible faces computed from 
 simulator's box poses; the accuracy goes into the manifest.
 
 Artifact (``data/label/<version>/``): ``labels/<split>-<shard>.npz`` aligned with the
-generation shards, one row per grasp point (see ``LABEL_FIELDS``), plus ``log.rrd``/``log.mcap``.
+generation shards, one row per grasp point (see ``pipeline.dataset.labels.LABEL_FIELDS``), plus ``log.rrd``/``log.mcap``.
 Interrupted runs resume (``pipeline.artifacts.store``): a rerun keeps the label shards a killed
 run finished, rebuilding their summaries from the files and from each shard's accuracy records
 (kept in the work folder's ``.resume/``, not in the artifact), and labels the rest.
@@ -31,7 +31,6 @@ run finished, rebuilding their summaries from the files and from each shard's ac
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import os
 import time
@@ -46,45 +45,20 @@ from pipeline.artifacts import (
     artifact_file, compute_version, resolve_artifact, run_stage, stage_config,
 )
 from pipeline.artifacts.store import StageRun
-from pipeline.camera.geometry import quat_from_matrix
+from pipeline.camera.geometry import quat_from_axes
 from pipeline.cli import CONF_DIR, data_root, stage_main
 from pipeline.dataset.scenes import SPLITS, Scene, SceneDataset
 from pipeline.dataset.storage import read_npz, write_npz
 from pipeline.executor import log_quota, map_shards, resolve_workers
-from pipeline.labelling.hand import hand_label
-from pipeline.labelling.surfaces import (
-    SurfaceDetectionConfig, aggregate, detect_surfaces, match_surfaces, true_visible_faces,
-)
-from pipeline.labelling.types import GraspClass
+from pipeline.dataset.labels import LABEL_FIELDS, LabelSet
+from pipeline.labelling.scene import label_scene
+from pipeline.labelling.surfaces import aggregate
+from pipeline.labelling.types import CLASS_COLORS, NG_REASONS, GraspClass
 from pipeline.tracking import StageLog, default_blueprint
 
 STAGE = "label"
 SECTIONS = ("hand", "surfaces", "label", "robot", "motion")
 NOT_AFFECTING_RESULT = ("label.workers", "label.force", "label.generate_version")
-
-NG_REASONS = ("", "too_small", "center_occluded", "ik", "joint_limits", "collision",
-              "path_collision", "path_joint_limits", "path_timeout", "path_lost")
-CLASS_COLORS = {GraspClass.R: (230, 60, 60), GraspClass.L: (60, 200, 60),
-                GraspClass.B: (60, 120, 255), GraspClass.NG: (150, 150, 150)}
-
-# One row per grasp point in labels/<split>-<shard>.npz:
-LABEL_FIELDS = {
-    "scene_index": "(P,) int64 scene index within the split",
-    "instance": "(P,) int16 the box's value in the scene's instance mask",
-    "uv": "(P, 2) float32 grasp point g in pixels (u, v)",
-    "center_cam": "(P, 3) float32 surface centre, camera frame, m",
-    "normal_cam": "(P, 3) float32 unit normal towards the camera",
-    "long_axis_cam": "(P, 3) float32", "short_axis_cam": "(P, 3) float32",
-    "lengths": "(P, 2) float32 L_l, L_s in m", "area": "(P,) float32 m^2",
-    "x_axis_cam": "(P, 3) float32 the surface axis the hand's X is aligned with",
-    "theta_deg": "(P, 2) float32 θ1, θ2 (warped view), degrees",
-    "hand_class": "(P,) int8 hand-level class (0 R, 1 L, 2 B, 3 NG)",
-    "grasp_class": "(P,) int8 final class after the robot-level check",
-    "ng_reason": "(P,) int8 index into NG_REASONS ('' when graspable)",
-    "num_points": "(P,) int32 RANSAC inliers",
-    "points_per_scene": "(N,) int32 grasp points of each scene of the shard (rows are in order)",
-}
-
 
 @dataclass(frozen=True)
 class LabelTask:
@@ -117,71 +91,6 @@ def _init_worker(cfg_obj, gen_dir: str) -> None:
     if cfg_obj.label.robot_checks:
         from pipeline.labelling.robot_check import RobotChecker
         _STATE["robot"] = RobotChecker(cfg_obj)
-
-
-def surface_config(cfg) -> SurfaceDetectionConfig:
-    s = cfg.surfaces
-    return SurfaceDetectionConfig(distance_threshold=s.distance_threshold, ransac_n=s.ransac_n,
-                                  ransac_backend=s.ransac_backend,
-                                  num_iterations=s.num_iterations, min_inliers=s.min_inliers,
-                                  max_surfaces_per_object=s.max_surfaces_per_object)
-
-
-def label_scene(scene: Scene, cfg, robot=None, bin_cfg=None
-                ) -> tuple[dict[str, np.ndarray], dict, float, float]:
-    """Grasp points of one scene: (rows, accuracy match record, surface seconds, robot seconds).
-
-    ``bin_cfg``: the bin the scene was generated in (robot-level collision checks).
-    """
-    t0 = time.perf_counter()
-    # Labels come from the ideal depth (the simulator's geometry): with a sensor model the
-    # network sees noisy depth with holes but learns where the true surfaces are.
-    depth = scene.depth_clean_m
-    surfaces = detect_surfaces(depth, scene.mask, scene.intrinsics, surface_config(cfg))
-    truth = true_visible_faces(depth, scene.mask, scene.intrinsics, scene.boxes,
-                               cfg.surfaces.truth_min_visible_px)
-    match = match_surfaces(surfaces, truth, cfg.surfaces.match_max_center_dist,
-                           cfg.surfaces.match_max_normal_deg)
-    t1 = time.perf_counter()
-    rows = []
-    if robot is not None and surfaces:
-        robot.set_scene(scene, bin_cfg)
-    H, W = scene.mask.shape
-    for s in surfaces:
-        hl = hand_label(s, cfg.hand)
-        u, v = np.clip(np.round(s.center_px).astype(int), 0, [W - 1, H - 1])
-        if hl.grasp_class != GraspClass.NG and scene.mask[v, u] != s.instance:
-            # The centre of the visible region falls on another box (a box lying across this
-            # face): a cup placed there would not touch this surface.
-            hl = dataclasses.replace(hl, grasp_class=GraspClass.NG, reason="center_occluded")
-        final, reason = hl.grasp_class, hl.reason or ""
-        if robot is not None and final != GraspClass.NG:
-            reason = robot.check(s, hl, cfg.hand) or ""
-            if reason:
-                final = GraspClass.NG
-        rows.append((s, hl, final, reason))
-    t2 = time.perf_counter()
-
-    def arr(fn, dtype, shape=()):
-        return np.asarray([fn(r) for r in rows], dtype=dtype).reshape((len(rows), *shape))
-
-    out = {
-        "instance": arr(lambda r: r[0].instance, np.int16),
-        "uv": arr(lambda r: r[0].center_px, np.float32, (2,)),
-        "center_cam": arr(lambda r: r[0].center_cam, np.float32, (3,)),
-        "normal_cam": arr(lambda r: r[0].normal_cam, np.float32, (3,)),
-        "long_axis_cam": arr(lambda r: r[0].long_axis_cam, np.float32, (3,)),
-        "short_axis_cam": arr(lambda r: r[0].short_axis_cam, np.float32, (3,)),
-        "lengths": arr(lambda r: (r[0].long_length, r[0].short_length), np.float32, (2,)),
-        "area": arr(lambda r: r[0].area, np.float32),
-        "x_axis_cam": arr(lambda r: r[1].x_axis_cam, np.float32, (3,)),
-        "theta_deg": arr(lambda r: (r[1].theta1_deg, r[1].theta2_deg), np.float32, (2,)),
-        "hand_class": arr(lambda r: int(r[1].grasp_class), np.int8),
-        "grasp_class": arr(lambda r: int(r[2]), np.int8),
-        "ng_reason": arr(lambda r: NG_REASONS.index(r[3]), np.int8),
-        "num_points": arr(lambda r: r[0].num_points, np.int32),
-    }
-    return out, match, t1 - t0, t2 - t1
 
 
 def label_shard(task: LabelTask) -> LabelSummary:
@@ -273,36 +182,6 @@ def run_tasks(tasks, cfg_obj, gen_dir: Path, workers: int, progress: bool):
                       workers=workers, desc=STAGE, progress=progress, executor=cfg_obj.executor)
 
 
-class LabelSet:
-    """Read a label artifact back: ``LabelSet(folder, split)[i]`` → dict of the scene's rows."""
-
-    def __init__(self, folder: Path, split: str) -> None:
-        self.folder = Path(folder)
-        meta = json.loads((self.folder / "labels.json").read_text())
-        self.shards = meta["splits"][split]
-        # Shard paths, checked to stay inside the artifact folder (ArtifactError otherwise).
-        self._paths = [artifact_file(self.folder, s["file"]) for s in self.shards]
-        self._starts = np.array([s["first"] for s in self.shards], dtype=np.int64)
-        self._len = int(sum(s["count"] for s in self.shards))
-        self._cache = None
-
-    def __len__(self) -> int:
-        return self._len
-
-    def __getitem__(self, i: int) -> dict[str, np.ndarray]:
-        if not 0 <= i < self._len:
-            raise IndexError(f"scene {i} out of range ({self._len} scenes)")
-        k = int(np.searchsorted(self._starts, i, side="right") - 1)
-        if self._cache is None or self._cache[0] != k:
-            arrays = read_npz(self._paths[k])
-            starts = np.concatenate([[0], np.cumsum(arrays["points_per_scene"])])
-            self._cache = (k, arrays, starts)
-        _, arrays, starts = self._cache
-        row = i - int(self._starts[k])
-        a, b = int(starts[row]), int(starts[row + 1])
-        return {key: v[a:b] for key, v in arrays.items() if key != "points_per_scene"}
-
-
 ROBOT_SAMPLE_SCENES = 10  # logged scenes that also show the robot at a target pose
 
 
@@ -338,7 +217,7 @@ def _log_scene(log: StageLog, scene: Scene, rows: dict, log_index: int, robot=No
     colors = np.array([CLASS_COLORS[c] for c in classes], np.uint8).reshape(-1, 3)
     log.log_points("world/camera/grasp_points", rows["center_cam"].reshape(-1, 3), colors)
     n = len(classes)
-    quats = np.array([_quat_from_axes(rows["long_axis_cam"][i], rows["short_axis_cam"][i],
+    quats = np.array([quat_from_axes(rows["long_axis_cam"][i], rows["short_axis_cam"][i],
                                       rows["normal_cam"][i]) for i in range(n)]).reshape(-1, 4)
     sizes = np.column_stack([rows["lengths"], np.full(n, 0.001)]).reshape(-1, 3)
     log.log_boxes("world/camera/surfaces", rows["center_cam"].reshape(-1, 3), sizes, quats,
@@ -348,15 +227,6 @@ def _log_scene(log: StageLog, scene: Scene, rows: dict, log_index: int, robot=No
     counts = np.bincount(rows["grasp_class"], minlength=4)
     log.log_text("log", f"{scene.split} scene {scene.index}: {n} grasp points; "
                         + ", ".join(f"{c.name} {counts[c]}" for c in GraspClass))
-
-
-def _quat_from_axes(x, y, z) -> np.ndarray:
-    R = np.column_stack([x, y, z]).astype(np.float64)
-    u, _, vt = np.linalg.svd(R)
-    R = u @ vt
-    if np.linalg.det(R) < 0:
-        R[:, 2] *= -1
-    return quat_from_matrix(R)
 
 
 def label(cfg: DictConfig) -> Path:

@@ -140,10 +140,10 @@ def table1_rows(p: Pipelines, inputs: list[str], radius_px: float, max_images: i
     from tqdm import tqdm
 
     from pipeline.dataset.scenes import SceneDataset
-    from pipeline.label import LabelSet
+    from pipeline.dataset.labels import LabelSet
     from pipeline.planner.data import GraspDataset
     from pipeline.planner.planner import Planner
-    from pipeline.train import table1
+    from pipeline.planner.scoring import table1
 
     gen_dir, label_dir = p.dirs["generate_noisy"], p.dirs["label_noisy"]
     scenes = SceneDataset(gen_dir, "test")

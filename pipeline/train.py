@@ -20,8 +20,9 @@ artifact it names. Output: ``models/train/<version>/`` with
 Optimiser (Sec. 6): Adam, lr 1e-4, betas (0.9, 0.999), batch 16; loss (Eqs. 4–6): λ = 1,
 α = 0.25, γ = 2. Stopping: ``train.epochs`` is a budget; training stops once ``train.patience``
 epochs pass without a lower validation loss, and the model is the epoch with the lowest one
-(its weights kept in the resume folder's ``best.pt``). Depth normalisation: ``pipeline.planner.data``. Augmentation: none by default
-(``train.augment_flip``, see ``pipeline.planner.augment``).
+(its weights kept in the resume folder's ``best.pt``). Depth normalisation:
+``pipeline.planner.data``. Augmentation: each training image mirrored at random in u, v, both
+or neither (``train.augment_flip``, see ``pipeline.planner.augment``).
 
 Determinism: weights are initialised from ``torch.manual_seed(seed)``; the data order and flips
 of epoch e come from a generator seeded by (seed, e); CPU threads are fixed
@@ -70,18 +71,17 @@ from pipeline.artifacts.csvfile import write_rows
 from pipeline.artifacts.store import ArtifactError, StageRun
 from pipeline.camera.geometry import backproject
 from pipeline.cli import CONF_DIR, data_root, stage_main
-from pipeline.label import CLASS_COLORS, LabelSet
-from pipeline.labelling.types import GraspClass
+from pipeline.dataset.labels import LabelSet
+from pipeline.labelling.types import CLASS_COLORS, GraspClass
 from pipeline.planner.augment import FLIPS
-from pipeline.planner.calibration import RankedImage, choose_threshold, threshold_curve
+from pipeline.planner.calibration import choose_threshold, threshold_curve
 from pipeline.planner import distributed
-from pipeline.planner.data import GraspDataset, Normalisation, make_loader
-from pipeline.planner.distributed import DistContext
-from pipeline.planner.decode import decode_output
-from pipeline.planner.evaluate import ImagePredictions, downsample_curve, precision_table
+from pipeline.planner.data import GraspDataset, epoch_batches, make_loader, normalisation
+from pipeline.planner.evaluate import downsample_curve
 from pipeline.planner.loss import LossConfig, grasp_loss
-from pipeline.planner.network import GraspNet, NetworkConfig, count_flops, count_parameters
+from pipeline.planner.network import GraspNet, count_flops, count_parameters, network_config
 from pipeline.planner.planner import MODEL_FILE, Planner, pick_device, ranking_config
+from pipeline.planner.scoring import EVAL_BATCH, ranked_images, table1
 from pipeline.tracking import StageLog
 
 STAGE = "train"
@@ -91,29 +91,6 @@ NOT_AFFECTING_RESULT = ("train.label_version", "train.force", "train.device", "t
 CHECKPOINT = "checkpoint.pt"
 BEST = "best.pt"  # in the resume folder: the weights of the epoch with the lowest val loss
 RESUME_PREFIX = ".resume-"
-EVAL_BATCH = 16
-
-
-def network_config(cfg) -> NetworkConfig:
-    m = cfg.model
-    return NetworkConfig(width=float(m.width), grid=int(m.grid), input_size=int(m.input_size),
-                         num_classes=int(m.num_classes), leaky_slope=float(m.leaky_slope))
-
-
-def normalisation(cfg) -> Normalisation:
-    d_ground = float(cfg.camera.height_above_bin_floor + cfg.bin.floor_thickness)
-    return Normalisation(d_ground, float(cfg.train.depth_scale),
-                         float(cfg.train.missing_depth_value))
-
-
-def epoch_order(n: int, seed: int, epoch: int, flip: str) -> tuple[list[int], list[str]]:
-    """Epoch ``epoch``'s image order and per-image flips, from (seed, epoch) only."""
-    gen = torch.Generator().manual_seed(seed * 1_000_003 + epoch)
-    order = torch.randperm(n, generator=gen).tolist()
-    choices = {"none": ["none"], "u": ["none", "u"], "v": ["none", "v"],
-               "uv": ["none", "u", "v", "uv"]}[flip]
-    picks = torch.randint(len(choices), (n,), generator=gen).tolist()
-    return order, [choices[k] for k in picks]
 
 
 def _interned(obj):
@@ -163,46 +140,6 @@ def evaluate_loss(net, data: GraspDataset, loss_cfg: LossConfig, device) -> floa
     return total / len(data)
 
 
-@torch.no_grad()
-def table1(planner: Planner, data: GraspDataset, radius_px: float, depth_of=None) -> dict:
-    """Table 1 on a split at the planner's th (``planner.evaluate``; the old definitions too).
-
-    ``depth_of(i)``: the (H, W) depth image, metres, the network sees for image i (default:
-    ``data.depth_m``, the generation artifact's ``depth``); the ground truth is ``data.rows``.
-    """
-    depth_of = data.depth_m if depth_of is None else depth_of
-    images = []
-    for start in range(0, len(data), EVAL_BATCH):
-        idx = list(range(start, min(start + EVAL_BATCH, len(data))))
-        raw = planner.predict(np.stack([depth_of(i) for i in idx]))
-        for k, i in enumerate(idx):
-            preds = decode_output(raw[k], threshold=-1.0, image_size=planner.size)
-            rows = data.rows[i]
-            images.append(ImagePredictions(
-                uv=np.array([[p.u, p.v] for p in preds], np.float64).reshape(-1, 2),
-                classes=np.array([int(p.grasp_class) for p in preds], np.int64),
-                scores=np.array([p.probability for p in preds], np.float64),
-                gt_uv=rows["uv"], gt_classes=rows["grasp_class"]))
-    return precision_table(images, radius_px, threshold=planner.ranking.threshold)
-
-
-@torch.no_grad()
-def ranked_images(planner: Planner, data: GraspDataset, progress: bool = False) -> list[RankedImage]:
-    """Every image of a split planned at the planner's th: its candidates in Eq. 7's order and
-    its label points (``pipeline.planner.calibration``)."""
-    out = []
-    for i in tqdm(range(len(data)), desc="train: calibrating th on val", unit="image",
-                  disable=not progress):
-        cands = planner.plan(data.depth_m(i), data.intrinsics)
-        rows = data.rows[i]
-        out.append(RankedImage(
-            uv=np.array([[c.u, c.v] for c in cands], np.float64).reshape(-1, 2),
-            classes=np.array([int(c.grasp_class) for c in cands], np.int64),
-            probabilities=np.array([c.probability for c in cands], np.float64),
-            gt_uv=rows["uv"], gt_classes=rows["grasp_class"]))
-    return out
-
-
 def _log_history(log: StageLog, history: dict, steps_per_epoch: int) -> None:
     for step, (t, c, k) in enumerate(zip(history["step_total"], history["step_coord"],
                                          history["step_class"])):
@@ -243,20 +180,6 @@ def _log_samples(log: StageLog, planner: Planner, data: GraspDataset, count: int
         best = (f"G_opt = ({cands[0].u:.0f}, {cands[0].v:.0f}) {cands[0].grasp_class.name} "
                 f"J = {cands[0].score:.3f}") if cands else "no candidate"
         log.log_text("log", f"test image {k}: {len(cands)} candidates; {best}")
-
-
-def _epoch_batches(n: int, batch: int, seed: int, epoch: int, flip: str,
-                   ctx: DistContext) -> tuple[list[list[tuple[int, str]]], list[float]]:
-    """Epoch ``epoch``'s batches for this rank, as (index, flip) lists, and their loss weights
-    (``distributed.split_batch``; one process: the whole batches, weight 1)."""
-    order, flips = epoch_order(n, seed, epoch, flip)
-    batches, weights = [], []
-    for start in range(0, n, batch):
-        idx, fl, w = distributed.split_batch(order[start:start + batch],
-                                             flips[start:start + batch], ctx.rank, ctx.world_size)
-        batches.append(list(zip(idx, fl)))
-        weights.append(w)
-    return batches, weights
 
 
 def best_epoch(val_loss: list[float]) -> int | None:
@@ -400,7 +323,7 @@ def train(cfg: DictConfig) -> Path | None:
             if distributed.broadcast(ctx, should_stop(history["val_loss"], int(tc.patience))
                                      if ctx.is_main else None):
                 break
-            batches, weights = _epoch_batches(n, batch, seed, epoch, tc.augment_flip, ctx)
+            batches, weights = epoch_batches(n, batch, seed, epoch, tc.augment_flip, ctx)
             loader = make_loader(train_set, batches, int(tc.loader_workers))
             model.train()
             t_epoch = time.perf_counter()

@@ -104,10 +104,10 @@ def unseen_tables(cfg, dirs: dict[str, Path], progress: bool) -> tuple[list, lis
     """Table 1 and Table 2 rows (seen from the manifests, unseen measured here) and each
     planner's G_opt on the unseen test images."""
     from pipeline import baseline as bl
-    from pipeline.label import LabelSet
+    from pipeline.dataset.labels import LabelSet
     from pipeline.planner.data import GraspDataset
     from pipeline.planner.planner import Planner
-    from pipeline.train import table1
+    from pipeline.planner.scoring import table1
 
     base = scale_overrides(cfg, None)
     radius_t1 = float(compose("train", base).train.match_radius_px)

@@ -20,21 +20,19 @@ from pipeline.artifacts import (
     ArtifactError, artifact_file, load_manifest, resolve_artifact, verify_artifact,
 )
 from pipeline.artifacts.fingerprint import sha256_file
+from conftest import smoke_overrides
 from pipeline.cli import MissingLibraryError, compose, import_with_fix, stage_main
 from pipeline.dataset.scenes import SceneDataset
-from pipeline.generate import generate
-from pipeline.label import LabelSet, label
+from pipeline.dataset.labels import LabelSet
+from pipeline.label import label
 from pipeline.train import train
 
 REPO = Path(__file__).resolve().parents[1]
-TINY = ("generate.num_scenes=3", "generate.num_val_scenes=1", "generate.num_test_scenes=1",
-        "generate.scenes_per_shard=2", "generate.workers=1", "label.workers=1",
-        "label.robot_checks=false")
 STAGES = ("label", "train", "baseline", "evaluate", "report")
 
 
 def _overrides(root: Path, *extra: str) -> list[str]:
-    return ["experiment=smoke", f"paths.root={root}", "logging.progress=false", *TINY, *extra]
+    return smoke_overrides(root, *extra)
 
 
 def _cfg(stage: str, root: Path, *extra: str):
@@ -48,13 +46,10 @@ def _stage_fn(stage: str):
 
 
 @pytest.fixture(scope="module")
-def built(tmp_path_factory) -> Path:
-    """A tiny generation, label and train artifact (and the train stage's resume checkpoint)."""
-    root = tmp_path_factory.mktemp("bad_artifacts") / "root"
-    generate(_cfg("generate", root))
-    label(_cfg("label", root))
-    train(_cfg("train", root))
-    return root
+def built(smoke_pipeline) -> Path:
+    """The session's smoke generation, label and train artifacts (and the train stage's resume
+    checkpoint). Every test here checks that it is left exactly as it was."""
+    return smoke_pipeline.root
 
 
 @pytest.fixture

@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 
 from pipeline.labelling.types import GraspClass
-from pipeline.planner.calibration import (RankedImage, choose_threshold, gopt_correct,
-                                          threshold_curve)
+from pipeline.planner.calibration import choose_threshold, gopt_correct, threshold_curve
 from pipeline.planner.evaluate import ImagePredictions, precision_table
 from pipeline.train import best_epoch, should_stop
 
@@ -18,8 +17,8 @@ R, L, B, NG = (int(c) for c in GraspClass)
 
 
 def _img(uv, classes, probs, gt_uv, gt_classes):
-    return RankedImage(np.array(uv, float).reshape(-1, 2), np.array(classes, int),
-                       np.array(probs, float), np.array(gt_uv, float).reshape(-1, 2),
+    return ImagePredictions(np.array(uv, float).reshape(-1, 2), np.array(classes, int),
+                            np.array(probs, float), np.array(gt_uv, float).reshape(-1, 2),
                        np.array(gt_classes, int))
 
 

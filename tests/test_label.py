@@ -6,28 +6,25 @@ import numpy as np
 import pytest
 
 from pipeline.artifacts import load_manifest, verify_artifact
+from conftest import smoke_overrides
 from pipeline.cli import compose
 from pipeline.dataset import SceneDataset
+from pipeline.dataset.labels import LabelSet
 from pipeline.generate import generate
-from pipeline.label import NG_REASONS, LabelSet, label
-from pipeline.labelling.types import GraspClass
+from pipeline.label import label
+from pipeline.labelling.types import NG_REASONS, GraspClass
 from pipeline.tracking import mcap_message_counts, rrd_entity_paths
-
-TINY = ("generate.num_scenes=3", "generate.num_val_scenes=1", "generate.num_test_scenes=1",
-        "generate.scenes_per_shard=2", "generate.workers=1")
 
 
 def _cfg(stage, root, *extra):
-    return compose(stage, ["experiment=smoke", f"paths.root={root}", "logging.progress=false",
-                           *TINY, *extra])
+    return compose(stage, smoke_overrides(root, *extra))
 
 
 @pytest.fixture(scope="module")
-def labelled(tmp_path_factory):
-    root = tmp_path_factory.mktemp("label")
-    gen = generate(_cfg("generate", root))
-    folder = label(_cfg("label", root, "label.workers=1"))
-    return root, gen, folder
+def labelled(smoke_pipeline):
+    """The session's smoke pipeline: (root, generation folder, label folder). Read-only."""
+    return (smoke_pipeline.root, smoke_pipeline.artifact("generate"),
+            smoke_pipeline.artifact("label"))
 
 
 def test_label_artifact(labelled):
@@ -74,18 +71,21 @@ def test_label_artifact(labelled):
 
 
 def test_label_logs(labelled):
-    _, _, folder = labelled
+    _, gen, folder = labelled
     entities = rrd_entity_paths(folder / "log.rrd")
     assert {"/world/camera/depth", "/world/camera/grasp_points",
             "/world/camera/surfaces", "/world/robot/links", "/world/robot/target_camera"} <= entities
+    scenes = sum(len(SceneDataset(gen, s)) for s in ("train", "val", "test"))
+    logged = min(scenes, compose("label", ["experiment=smoke"]).logging.max_logged_scenes)
     counts = mcap_message_counts(folder / "log.mcap")
-    assert counts["/world/camera/depth"] == 5 and counts["/world/camera/grasp_points"] == 5
+    assert counts["/world/camera/depth"] == logged and counts["/world/camera/grasp_points"] == logged
 
 
-def test_label_same_whatever_the_workers(labelled, tmp_path):
-    root, _, folder = labelled
+def test_label_same_whatever_the_workers(smoke_pipeline, labelled, tmp_path):
+    _, _, folder = labelled
+    root = smoke_pipeline.copy(tmp_path / "root", tops=("data",)).root
     other = label(_cfg("label", root, "label.workers=2", "label.force=true"))
-    assert other == folder
+    assert other.name == folder.name
     a = load_manifest(folder)["files"]
     assert verify_artifact(other) == []
     # Same version, recomputed with two workers: every label file identical.
@@ -94,9 +94,9 @@ def test_label_same_whatever_the_workers(labelled, tmp_path):
         {k: v for k, v in b.items() if k != "log.rrd"}
 
 
-def test_without_robot_checks_hand_classes_stand(labelled):
-    root, _, _ = labelled
-    folder = label(_cfg("label", root, "label.workers=1", "label.robot_checks=false"))
+def test_without_robot_checks_hand_classes_stand(smoke_pipeline, tmp_path):
+    root = smoke_pipeline.copy(tmp_path / "root", tops=("data",)).root
+    folder = label(_cfg("label", root, "label.robot_checks=false"))
     rows = LabelSet(folder, "train")[0]
     assert (rows["grasp_class"] == rows["hand_class"]).all()
 

@@ -7,7 +7,7 @@ import numpy as np
 
 
 def test_oracle_candidates_equal_the_labels(smoke_cfg):
-    from pipeline.label import label_scene
+    from pipeline.labelling.scene import label_scene
     from pipeline.labelling.robot_check import RobotChecker, robot_config
     from pipeline.labelling.types import GraspClass
     from pipeline.picking.cell import PickCell

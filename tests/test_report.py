@@ -16,13 +16,17 @@ from pipeline.artifacts import ArtifactError, load_manifest, verify_artifact
 from pipeline.cli import compose, stage_main
 from pipeline.dataset.scenes import SPLITS, SceneDataset
 from pipeline.generate import generate
-from pipeline.label import LabelSet, label
+from pipeline.dataset.labels import LabelSet
+from pipeline.label import label
 from pipeline.labelling.types import GraspClass
 from pipeline.planner.evaluate import PAPER_TABLE1
-from pipeline.report import (
-    LABEL_NOT_RUN, ROBUSTNESS_NOT_RUN, TABLE1_SECTION, TRAIN_NOT_RUN, LabelInfo, _outline,
-    check_labels, dataset_stats, publish, report,
-)
+from pipeline.report import report
+from pipeline.report.dataset import dataset_stats
+from pipeline.report.figures import outline
+from pipeline.report.labels import LABEL_NOT_RUN, LabelInfo, check_labels
+from pipeline.report.publish import publish
+from pipeline.report.robustness import ROBUSTNESS_NOT_RUN
+from pipeline.report.training import TABLE1_SECTION, TRAIN_NOT_RUN
 from pipeline.train import train
 
 TINY = ("generate.num_scenes=4", "generate.num_val_scenes=1", "generate.num_test_scenes=2",
@@ -399,7 +403,7 @@ def test_outline_marks_box_pixels_next_to_other_values() -> None:
     mask[1:4, 1:4] = 1  # a 3x3 box: its 8 border pixels are outline, the centre is not
     expected = mask.astype(bool).copy()
     expected[2, 2] = False
-    np.testing.assert_array_equal(_outline(mask), expected)
+    np.testing.assert_array_equal(outline(mask), expected)
 
 
 def test_sample_count_is_validated(root_a: Path) -> None:

@@ -12,12 +12,13 @@ import pytest
 
 from pipeline.artifacts import ArtifactError, run_stage
 from pipeline.cli import compose
-from pipeline.report import (
-    NOT_AFFECTING_RESULT, ROBUSTNESS_NOT_RUN, ROBUSTNESS_SECTION, render_robustness,
-    resolve_robustness, robustness_closed_loop_table, robustness_failures_table,
-    robustness_generation, robustness_policies_table, robustness_sensor_table,
-    robustness_table1_table, robustness_table2_table,
+from pipeline.report.robustness import (
+    ROBUSTNESS_NOT_RUN, ROBUSTNESS_SECTION, render_robustness, resolve_robustness,
+    robustness_closed_loop_table, robustness_failures_table, robustness_generation,
+    robustness_policies_table, robustness_sensor_table, robustness_table1_table,
+    robustness_table2_table,
 )
+from pipeline.report.stage import NOT_AFFECTING_RESULT
 
 VERSION = "00000000000000aa"
 NAN = float("nan")

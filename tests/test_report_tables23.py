@@ -2,9 +2,10 @@
 
 from pathlib import Path
 
-from pipeline.report import (
-    ArtifactInfo, ablation_table, failures_table, path_deviation_table, table2_table, table3_table,
-)
+from pipeline.report.ablation import ablation_table
+from pipeline.report.baseline import table2_table
+from pipeline.report.closed_loop import failures_table, path_deviation_table, table3_table
+from pipeline.report.upstream import ArtifactInfo
 
 
 def test_table2_puts_the_paper_beside_every_planner():

@@ -11,10 +11,9 @@ import torch
 from pipeline.artifacts import load_manifest, verify_artifact
 from pipeline.artifacts.fingerprint import sha256_file
 from pipeline.camera.geometry import Intrinsics
+from conftest import smoke_overrides
 from pipeline.cli import compose
 from pipeline.config.schema import HandConfig
-from pipeline.generate import generate
-from pipeline.label import label
 from pipeline.labelling.hand import hand_label
 from pipeline.labelling.types import GraspClass, Surface
 from pipeline.planner.augment import flip_image, flip_rows
@@ -23,27 +22,22 @@ from pipeline.planner.planner import Planner
 from pipeline.tracking import rrd_entity_paths, rrd_timelines
 from pipeline.train import RESUME_PREFIX, train
 
-TINY = ("generate.num_scenes=3", "generate.num_val_scenes=1", "generate.num_test_scenes=1",
-        "generate.scenes_per_shard=2", "generate.workers=1")
 R, L, B, NG = (int(c) for c in GraspClass)
 
 
 def _cfg(stage, root, *extra):
-    return compose(stage, ["experiment=smoke", f"paths.root={root}", "logging.progress=false",
-                           *TINY, *extra])
+    return compose(stage, smoke_overrides(root, *extra))
 
 
 @pytest.fixture(scope="module")
-def labelled_root(tmp_path_factory):
-    root = tmp_path_factory.mktemp("train")
-    generate(_cfg("generate", root))
-    label(_cfg("label", root, "label.workers=1", "label.robot_checks=false"))
-    return root
+def labelled_root(smoke_pipeline):
+    """The session's smoke pipeline (read-only: training on it again reuses its artifact)."""
+    return smoke_pipeline.root
 
 
 def _fresh_models(root, name):
-    """A scratch copy of the data with its own models/ folder."""
-    other = root.parent / name
+    """A scratch copy of the data with its own models/ folder (beside ``root``)."""
+    other = root.parent / f"{root.name}-{name}"
     if other.exists():
         shutil.rmtree(other)
     shutil.copytree(root / "data", other / "data", symlinks=True)
@@ -88,6 +82,21 @@ def test_resume_matches_uninterrupted(labelled_root):
     assert (load_manifest(resumed)["metrics"]["train_loss_per_epoch"]
             == load_manifest(fresh)["metrics"]["train_loss_per_epoch"])
     assert load_manifest(resumed)["timings"]["epochs_run_here"] == 1
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU")
+def test_train_on_cuda(labelled_root):
+    """The smoke training on a GPU: its own version (the device type is part of the key), a
+    verified artifact whose model plans on the CPU, and a finite loss."""
+    root = _fresh_models(labelled_root, "train-cuda")
+    folder = train(_cfg("train", root, "train.device=cuda"))
+    assert verify_artifact(folder) == []
+    manifest = load_manifest(folder)
+    assert manifest["config"]["train"]["device_type"] == "cuda"
+    assert folder.name != train(_cfg("train", labelled_root)).name  # the CPU artifact
+    assert np.isfinite(manifest["metrics"]["train_loss_per_epoch"]).all()
+    planner = Planner.load(folder, device="cpu")
+    assert planner.predict(np.full((1, 416, 416), 0.6, np.float32)).shape == (1, 6, 13, 13)
 
 
 def test_planner_load_and_plan(labelled_root):

@@ -14,10 +14,12 @@ from pipeline.artifacts import load_manifest
 from pipeline.cli import compose
 from pipeline.dataset.scenes import SceneDataset
 from pipeline.generate import generate
-from pipeline.label import LabelSet, label
+from pipeline.dataset.labels import LabelSet
+from pipeline.label import label
 from pipeline.planner.data import DepthShards, GraspDataset, Normalisation, make_loader
 from pipeline.planner.distributed import DistContext, split_batch
-from pipeline.train import _epoch_batches, train
+from pipeline.planner.data import epoch_batches
+from pipeline.train import train
 
 SMALL = ("generate.num_scenes=12", "generate.num_val_scenes=2", "generate.num_test_scenes=2",
          "generate.scenes_per_shard=5", "generate.workers=1")
@@ -53,10 +55,10 @@ def test_split_batch_hand_cases():
 
 def test_every_image_seen_once_per_epoch_whatever_the_ranks():
     n, batch, seed = 23, 4, 7
-    one, w1 = _epoch_batches(n, batch, seed, 2, "uv", DistContext())
+    one, w1 = epoch_batches(n, batch, seed, 2, "uv", DistContext())
     assert w1 == [1.0] * len(one)
     for world in (2, 3):
-        parts = [_epoch_batches(n, batch, seed, 2, "uv", DistContext(r, world, r, world))[0]
+        parts = [epoch_batches(n, batch, seed, 2, "uv", DistContext(r, world, r, world))[0]
                  for r in range(world)]
         for step, full in enumerate(one):
             seen = [item for r in range(world) for item in parts[r][step]]

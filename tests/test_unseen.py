@@ -40,7 +40,8 @@ def test_bad_input_is_refused_before_any_work(tmp_path):
 @pytest.mark.slow
 def test_smoke_unseen_end_to_end(tmp_path):
     from pipeline.artifacts import load_manifest
-    from pipeline.report import UNSEEN_SECTION, report
+    from pipeline.report import report
+    from pipeline.report.unseen import UNSEEN_SECTION
     from pipeline.unseen import unseen
 
     base = _base(tmp_path)

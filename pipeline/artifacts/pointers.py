@@ -12,7 +12,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterable
 
-from pipeline.artifacts.store import LATEST, _point_latest
+from pipeline.artifacts.store import LATEST, point_latest
 
 
 @contextmanager
@@ -24,4 +24,4 @@ def keep_latest(stage_dirs: Iterable[Path]):
         yield
     finally:
         for d, target in before.items():
-            _point_latest(d, target)
+            point_latest(d, target)

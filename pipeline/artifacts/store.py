@@ -166,7 +166,7 @@ def _hash_files(folder: Path) -> dict[str, dict[str, Any]]:
     return files
 
 
-def _point_latest(stage_dir: Path, version: str) -> None:
+def point_latest(stage_dir: Path, version: str) -> None:
     tmp = stage_dir / f"{TMP_PREFIX}latest-{uuid.uuid4().hex[:8]}"
     os.symlink(version, tmp)
     os.replace(tmp, stage_dir / LATEST)
@@ -445,7 +445,7 @@ class ArtifactWriter:
         os.replace(run.work_dir, run.final_dir)
         if old is not None:
             shutil.rmtree(old, ignore_errors=True)
-        _point_latest(self.stage_dir, run.version)
+        point_latest(self.stage_dir, run.version)
 
 
 def _fsync_tree(folder: Path) -> None:
@@ -484,7 +484,7 @@ def run_stage(
                             resumable=resumable, force=force)
 
     def reuse() -> Path:
-        _point_latest(writer.stage_dir, version)
+        point_latest(writer.stage_dir, version)
         say(f"[{stage}] version {version} already exists at {writer.run.final_dir}: reusing it "
             f"(pass {stage}.force=true to recompute).")
         return writer.run.final_dir

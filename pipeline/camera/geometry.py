@@ -132,3 +132,14 @@ def quat_from_matrix(R: np.ndarray) -> np.ndarray:
         q = [(R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, s / 4, (R[1, 0] - R[0, 1]) / s]
     q = np.asarray(q)
     return q / np.linalg.norm(q)
+
+
+def quat_from_axes(x, y, z) -> np.ndarray:
+    """Unit quaternion (x, y, z, w) of the frame with axes x, y, z (each (3,), in the parent
+    frame): the nearest rotation (SVD), its third axis flipped if the axes are left-handed."""
+    R = np.column_stack([x, y, z]).astype(np.float64)
+    u, _, vt = np.linalg.svd(R)
+    R = u @ vt
+    if np.linalg.det(R) < 0:
+        R[:, 2] *= -1
+    return quat_from_matrix(R)

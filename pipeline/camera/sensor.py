@@ -2,7 +2,7 @@
 
 The renderer gives ideal z-depth. ``apply_sensor_model`` turns it into what a structured-light
 camera returns, in four steps (parameters and their sources: ``conf/sensor/sr300.yaml`` and the
-README's "Sensor model" section):
+"The sensor model" in docs/robustness.md):
 
 1. **Surface normal and incidence angle** θ of every pixel, from the ideal depth
    (``incidence_angles``): the angle between the viewing ray and the surface normal.

@@ -87,7 +87,7 @@ class BoxesConfig:
 
 @dataclass
 class PhysicsConfig:
-    """pybullet settings and the rest criterion (see ``../shared/notes/simulation.md``)."""
+    """pybullet settings and the rest criterion (see docs/simulation.md)."""
 
     time_step: float = 1.0 / 240.0
     solver_iterations: int = 50

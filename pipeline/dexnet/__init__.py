@@ -3,5 +3,5 @@
 cross-entropy method policy (``cem``), an analytic depth-only quality (``quality``), the suction
 contact model that labels candidates in simulation (``contact``) and the GQ-CNN trained on those
 labels (``gqcnn``). ``planner.DexNetPlanner`` has the same call interface as the project's own
-planner. See ``../shared/notes/dexnet.md`` for the facts this follows.
+planner. docs/baseline.md gives the facts this follows.
 """

@@ -100,7 +100,7 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
 
 
-def _fit_plane(points: np.ndarray) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
+def fit_plane(points: np.ndarray) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
     """Least-squares plane of (N, 3) points: (unit normal, offset c, in-plane axes e1, e2).
 
     The normal is the direction of least variance (the scatter matrix's eigenvector of the
@@ -125,7 +125,7 @@ def _orient_long_axis(long_axis: np.ndarray) -> np.ndarray:
     return long_axis if long_axis[1] >= 0 else -long_axis
 
 
-def _region_surface(instance: int, us: np.ndarray, vs: np.ndarray, xn: np.ndarray,
+def region_surface(instance: int, us: np.ndarray, vs: np.ndarray, xn: np.ndarray,
                     yn: np.ndarray, normal: np.ndarray, offset: float, e1: np.ndarray,
                     e2: np.ndarray, intr: Intrinsics, extra: dict) -> Surface | None:
     """The Surface of a pixel region on the plane ``normal · X = offset`` (camera frame).
@@ -307,7 +307,7 @@ def _ransac_open3d(sample: np.ndarray, cfg: SurfaceDetectionConfig,
 @dataclass
 class _Plane:
     """A plane ``normal · X = offset`` found in a cluster, and its inliers (bool per point).
-    ``axes`` is the (e1, e2) of ``_fit_plane`` when the plane is exactly the least-squares fit of
+    ``axes`` is the (e1, e2) of ``fit_plane`` when the plane is exactly the least-squares fit of
     ``inliers`` (refinement converged), else None."""
 
     normal: np.ndarray
@@ -339,10 +339,10 @@ def _find_planes(points: np.ndarray, cfg: SurfaceDetectionConfig, instance: int)
         # Shortcut: if every remaining point lies within the threshold of their least-squares
         # plane (one face left, e.g. a box lying flat), RANSAC and its refinement would end at
         # that same plane and inlier set; skip them. Tried on the sample first (cheaper).
-        n, c, _, _ = _fit_plane(sample)
+        n, c, _, _ = fit_plane(sample)
         if np.abs(sample @ n - c).max() < thr:
             rest_points = points.take(rest, axis=0)
-            n, c, e1, e2 = _fit_plane(rest_points)
+            n, c, e1, e2 = fit_plane(rest_points)
             if np.abs(rest_points @ n - c).max() < thr:
                 planes.append(_Plane(n, c, remaining.copy(), (e1, e2)))
                 break
@@ -361,7 +361,7 @@ def _find_planes(points: np.ndarray, cfg: SurfaceDetectionConfig, instance: int)
         for _ in range(cfg.refine_iterations):
             if count < 3:
                 break
-            n, c, e1, e2 = _fit_plane(points.take(np.flatnonzero(inliers), axis=0))
+            n, c, e1, e2 = fit_plane(points.take(np.flatnonzero(inliers), axis=0))
             new = remaining & (np.abs(points @ n - c) < thr)
             new_count = int(new.sum())
             if new_count == count and np.array_equal(new, inliers):
@@ -446,9 +446,9 @@ def detect_surfaces(depth_m: np.ndarray, mask: np.ndarray, intrinsics: Intrinsic
                 # The region is exactly the refinement's inlier set: the same least-squares fit.
                 n, c, (e1, e2) = plane.normal, plane.offset, plane.axes
             else:
-                n, c, e1, e2 = _fit_plane(region_points)
+                n, c, e1, e2 = fit_plane(region_points)
             rmse = float(np.sqrt(np.mean((region_points @ n - c) ** 2)))
-            surface = _region_surface(instance, us[idx], vs[idx], xn[idx], yn[idx], n, c, e1, e2,
+            surface = region_surface(instance, us[idx], vs[idx], xn[idx], yn[idx], n, c, e1, e2,
                                       intrinsics, {"rmse_m": rmse, "plane_pixels": plane_pixels,
                                                    "regions": num_regions})
             if surface is not None:
@@ -533,7 +533,7 @@ def true_visible_faces(depth_m: np.ndarray, mask: np.ndarray, intrinsics: Intrin
             normal = sign * R[:, axis]
             face_centre = t + sign * half[axis] * R[:, axis]
             a, b = [k for k in range(3) if k != axis]
-            surface = _region_surface(
+            surface = region_surface(
                 instance, us[idx], vs[idx], xn[idx], yn[idx], normal, float(normal @ face_centre),
                 R[:, a], R[:, b], intrinsics,
                 {"face": name, "face_pixels": face_pixels, "full_face_center_cam": face_centre,

@@ -2,7 +2,7 @@
 
 A stand-in for a network that predicts its training labels perfectly. At home the camera's
 frame is labelled exactly as the labelling stage labels a generated scene
-(``pipeline.label.label_scene``: surfaces by RANSAC on the ideal depth and the simulator's
+(``pipeline.labelling.scene.label_scene``: surfaces by RANSAC on the ideal depth and the simulator's
 instance mask, the hand-level class, the robot-level check against the heap's true box poses),
 and the graspable points are ranked by Eq. 7 like the DCNN's candidates
 (``pipeline.planner.ranking``). Its Table 3 row is the ceiling of the cell's execution: it
@@ -62,7 +62,7 @@ class OraclePlanner:
                  frame: Frame | None = None) -> list[GraspCandidate]:
         if frame is None:
             raise ValueError("the oracle planner needs the home frame (PickRunner passes it)")
-        from pipeline.label import label_scene
+        from pipeline.labelling.scene import label_scene
 
         scene = self.scene(frame, intrinsics)
         rows, _, _, _ = label_scene(scene, self.cfg, self.robot, self.cfg.bin)

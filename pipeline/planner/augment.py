@@ -25,7 +25,9 @@ and ties come out of the same code as the labelling stage (``hand.camera_centre`
 
 Caveat: the robot-level check (IK, joint limits, collisions) is not mirror-symmetric (the robot
 stands on one side of the bin). A flipped image keeps each point's graspable/NG decision, which
-is exact for the hand level and an approximation for the robot level. Hence off by default.
+is exact for the hand level and an approximation for the robot level. It is on by default
+(``train.augment_flip: uv``) because it lowers the validation loss, which is measured on
+unflipped images with the true robot-level labels (docs/training.md).
 
 Mirroring a pixel about the image centre is the camera mirror only if the principal point is
 the image centre (cx = (W − 1)/2, cy = (H − 1)/2); ``flip_rows`` checks it.

@@ -34,27 +34,14 @@ ranking per image serves the whole grid.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from pipeline.labelling.types import GraspClass
 from pipeline.planner.evaluate import ImagePredictions, match_image
 
-
-@dataclass
-class RankedImage:
-    """One validation image: the planner's candidates at the grid's lowest th, in Eq. 7's order.
-
-    ``uv`` (K, 2) px, ``classes`` (K,) int, ``probabilities`` (K,) S of each candidate;
-    ``gt_uv`` (G, 2) px and ``gt_classes`` (G,) int: the image's label points (NG ignored).
-    """
-
-    uv: np.ndarray
-    classes: np.ndarray
-    probabilities: np.ndarray
-    gt_uv: np.ndarray
-    gt_classes: np.ndarray
+# An image here is an ``ImagePredictions`` whose rows are the planner's candidates at the grid's
+# lowest th in Eq. 7's order, ``scores`` being each candidate's S = max_c p(c)
+# (``pipeline.planner.scoring.ranked_images``).
 
 
 def has_graspable(gt_classes: np.ndarray) -> bool:
@@ -62,12 +49,12 @@ def has_graspable(gt_classes: np.ndarray) -> bool:
     return bool(np.any(np.asarray(gt_classes).reshape(-1) != GraspClass.NG))
 
 
-def gopt_correct(img: RankedImage, threshold: float, radius_px: float) -> bool | None:
+def gopt_correct(img: ImagePredictions, threshold: float, radius_px: float) -> bool | None:
     """Whether G_opt at ``threshold`` is correct (module docstring); None when the image has no
     graspable label point (not scored). No candidate above th: False."""
     if not has_graspable(img.gt_classes):
         return None
-    probs = np.asarray(img.probabilities, np.float64).reshape(-1)
+    probs = np.asarray(img.scores, np.float64).reshape(-1)
     above = np.nonzero(probs > threshold)[0]
     if len(above) == 0:
         return False
@@ -80,7 +67,7 @@ def gopt_correct(img: RankedImage, threshold: float, radius_px: float) -> bool |
     return bool(np.any(near & (gt_cls == int(np.asarray(img.classes).reshape(-1)[k]))))
 
 
-def threshold_curve(images: list[RankedImage], grid: list[float], radius_px: float) -> list[dict]:
+def threshold_curve(images: list[ImagePredictions], grid: list[float], radius_px: float) -> list[dict]:
     """One row per th of ``grid``: ``threshold``, ``gopt_accuracy`` (share of scored images whose
     G_opt is correct), ``no_candidate`` (share of scored images with nothing above th),
     ``precision``, ``recall``, ``f1`` (pooled detections above th on every image),
@@ -92,10 +79,10 @@ def threshold_curve(images: list[RankedImage], grid: list[float], radius_px: flo
     for th in grid:
         th = float(th)
         correct = [gopt_correct(img, th, radius_px) for img in scored]
-        empty = [not np.any(np.asarray(img.probabilities) > th) for img in scored]
+        empty = [not np.any(np.asarray(img.scores) > th) for img in scored]
         hits = taken = 0
         for img in images:
-            probs = np.asarray(img.probabilities, np.float64).reshape(-1)
+            probs = np.asarray(img.scores, np.float64).reshape(-1)
             sel = probs > th
             if not sel.any():
                 continue

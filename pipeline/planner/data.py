@@ -22,7 +22,9 @@ import torch
 
 from pipeline.dataset.scenes import SceneDataset
 from pipeline.dataset.storage import read_npz
+from pipeline.planner import distributed
 from pipeline.planner.augment import flip_image, flip_rows
+from pipeline.planner.distributed import DistContext
 from pipeline.planner.targets import encode, stack_targets
 
 
@@ -37,6 +39,15 @@ class Normalisation:
     def as_dict(self) -> dict:
         return {"d_ground": self.d_ground, "depth_scale": self.depth_scale,
                 "missing_depth_value": self.missing_depth_value}
+
+
+def normalisation(cfg) -> Normalisation:
+    """The network input's normalisation from a composed config: D_ground = the camera's height
+    above the bin floor plus the floor's thickness (metres), ``train.depth_scale`` and
+    ``train.missing_depth_value``."""
+    d_ground = float(cfg.camera.height_above_bin_floor + cfg.bin.floor_thickness)
+    return Normalisation(d_ground, float(cfg.train.depth_scale),
+                         float(cfg.train.missing_depth_value))
 
 
 def normalise_depth(depth_m: np.ndarray, norm: Normalisation) -> np.ndarray:
@@ -196,3 +207,27 @@ def make_loader(data: GraspDataset, batches: list[list[tuple[int, str]]], worker
     return torch.utils.data.DataLoader(data, batch_sampler=batches, collate_fn=data.collate,
                                        num_workers=workers,
                                        generator=torch.Generator().manual_seed(0), **kwargs)
+
+
+def epoch_order(n: int, seed: int, epoch: int, flip: str) -> tuple[list[int], list[str]]:
+    """Epoch ``epoch``'s image order and per-image flips, from (seed, epoch) only."""
+    gen = torch.Generator().manual_seed(seed * 1_000_003 + epoch)
+    order = torch.randperm(n, generator=gen).tolist()
+    choices = {"none": ["none"], "u": ["none", "u"], "v": ["none", "v"],
+               "uv": ["none", "u", "v", "uv"]}[flip]
+    picks = torch.randint(len(choices), (n,), generator=gen).tolist()
+    return order, [choices[k] for k in picks]
+
+
+def epoch_batches(n: int, batch: int, seed: int, epoch: int, flip: str,
+                   ctx: DistContext) -> tuple[list[list[tuple[int, str]]], list[float]]:
+    """Epoch ``epoch``'s batches for this rank, as (index, flip) lists, and their loss weights
+    (``distributed.split_batch``; one process: the whole batches, weight 1)."""
+    order, flips = epoch_order(n, seed, epoch, flip)
+    batches, weights = [], []
+    for start in range(0, n, batch):
+        idx, fl, w = distributed.split_batch(order[start:start + batch],
+                                             flips[start:start + batch], ctx.rank, ctx.world_size)
+        batches.append(list(zip(idx, fl)))
+        weights.append(w)
+    return batches, weights

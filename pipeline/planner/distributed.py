@@ -16,7 +16,7 @@ What differs: BatchNorm normalises each rank's part with that part's own statist
 usual semantics; ``SyncBatchNorm`` is used on CUDA, where PyTorch supports it, but not on CPU,
 where it does not), and DDP's bucketed all-reduce sums in another order; the final weights
 therefore differ from a one-process run in the last digits and drift apart a little over
-training. The measured difference is in the README ("Scaling out").
+training. How to run it and what it changes: docs/scaling.md ("Data-parallel training").
 """
 
 from __future__ import annotations

@@ -67,6 +67,13 @@ class NetworkConfig:
             raise ValueError(f"width must be > 0, got {self.width}")
 
 
+def network_config(cfg) -> NetworkConfig:
+    """The network of a composed config's ``model`` group."""
+    m = cfg.model
+    return NetworkConfig(width=float(m.width), grid=int(m.grid), input_size=int(m.input_size),
+                         num_classes=int(m.num_classes), leaky_slope=float(m.leaky_slope))
+
+
 def scaled(channels: int, width: float) -> int:
     """Darknet width ``channels`` scaled by ``width``, at least 1."""
     return max(1, int(round(channels * width)))

@@ -25,7 +25,7 @@ Algorithm and the choices made where the paper is vague:
    ``window`` × ``window`` (21 × 21) window centred on the rounded seed, clipped to the image;
    at least 10 points are needed. The fit is the least-squares plane (the smallest singular
    vector of the centred points; computed as the scatter matrix's eigenvector, which is the
-   same thing, by ``labelling.surfaces._fit_plane``). Additions, so that a window that
+   same thing, by ``labelling.surfaces.fit_plane``). Additions, so that a window that
    overlaps another surface (a seed near an edge; a box side face is only ~20 px tall) still
    gives the seed's plane: (a) ``window_hypotheses`` (default 50) RANSAC planes through three
    random window points (fixed-seed generator: reproducible) are scored by their window points
@@ -72,7 +72,7 @@ Algorithm and the choices made where the paper is vague:
    surface (``"region_too_small"``).
 6. **Surface geometry.** If ``refine`` (default), the plane is refitted by least squares on all
    the region's points, and ``normal_cam`` is that plane's normal; otherwise n̂. The centre,
-   axes and lengths are computed exactly as for the labels (``labelling.surfaces._region_surface``):
+   axes and lengths are computed exactly as for the labels (``labelling.surfaces.region_surface``):
    the rays through the region's pixel centres are intersected with the plane and the
    minimum-area rectangle of those points gives the centre (the centre of the visible region,
    on the plane, not the centroid of the points), the long / short axes and L_l, L_s (which
@@ -106,7 +106,7 @@ import numpy as np
 from pipeline.camera.depth_input import check_depth_image
 from pipeline.camera.geometry import Intrinsics
 from pipeline.labelling.hand import warped_axes
-from pipeline.labelling.surfaces import _fit_plane, _region_surface
+from pipeline.labelling.surfaces import fit_plane, region_surface
 
 MIN_WINDOW_POINTS = 10
 # The reasons ``describe_surface`` gives for finding no surface (see its docstring).
@@ -310,13 +310,13 @@ def _window_plane(win: np.ndarray, seed_point: np.ndarray, cfg: DescriptorConfig
             best = int(np.argmax(counts))
             if counts[best] >= MIN_WINDOW_POINTS:
                 used = inliers[:, best]
-    n_hat, c_hat, _, _ = _fit_plane(win[used])
+    n_hat, c_hat, _, _ = fit_plane(win[used])
     for _ in range(cfg.window_refits):
         inl = np.abs(win @ n_hat - c_hat) < cfg.eps_distance
         if inl.sum() < MIN_WINDOW_POINTS or np.array_equal(inl, used):
             break
         used = inl
-        n_hat, c_hat, _, _ = _fit_plane(win[used])
+        n_hat, c_hat, _, _ = fit_plane(win[used])
     return n_hat, c_hat
 
 
@@ -339,7 +339,7 @@ def _tracked_plane(win: np.ndarray, seed_point: np.ndarray, cfg: DescriptorConfi
     from it is the wrong face or nothing. The region found from this plane is refitted
     (``cfg.refine``), so the surface's normal is measured afresh in every frame."""
     n = np.asarray(expected, np.float64)
-    n = n if n @ seed_point < 0 else -n  # towards the camera, as _fit_plane's
+    n = n if n @ seed_point < 0 else -n  # towards the camera, as fit_plane's
     tol = _hypothesis_tolerance(seed_point, cfg)
     d = win @ n
     counts = (np.abs(d[None, :] - d[:, None]) < tol).sum(axis=1)  # (N,) per candidate offset
@@ -496,7 +496,7 @@ def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
     kernel = np.ones((3, 3), np.uint8)
     for _ in range(grow):
         grown = cv2.dilate(grown, kernel) & on_plane_c.view(np.uint8)
-    idx = np.flatnonzero(grown)  # row-major, as _region_surface needs
+    idx = np.flatnonzero(grown)  # row-major, as region_surface needs
     if len(idx) < cfg.min_pixels:
         return None, "region_too_small"
     rv, ru = np.divmod(idx, c1 - c0)
@@ -509,13 +509,13 @@ def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
     pts = np.stack([Xc.ravel()[idx], Yc.ravel()[idx], Zc.ravel()[idx]],
                    axis=1).astype(np.float64)
     if cfg.refine:
-        n, c, e1, e2 = _fit_plane(pts)
+        n, c, e1, e2 = fit_plane(pts)
     else:
         n, c = n_hat, c_hat
         e1 = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
         e1 /= np.linalg.norm(e1)
         e2 = np.cross(n, e1)
-    surface = _region_surface(0, ru, rv, xn[ru].astype(np.float64), yn[rv].astype(np.float64),
+    surface = region_surface(0, ru, rv, xn[ru].astype(np.float64), yn[rv].astype(np.float64),
                               n, float(c), e1, e2, intrinsics, {})
     if surface is None:
         return None, "edge_on"

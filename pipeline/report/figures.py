@@ -18,7 +18,8 @@ from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
 
 from pipeline.dataset.scenes import SPLITS, SceneDataset  # noqa: E402
-from pipeline.label import CLASS_COLORS, LabelSet  # noqa: E402
+from pipeline.dataset.labels import LabelSet  # noqa: E402
+from pipeline.labelling.types import CLASS_COLORS  # noqa: E402
 from pipeline.labelling.types import GraspClass  # noqa: E402
 
 FIG_DPI = 100
@@ -34,7 +35,7 @@ def _save(fig: Figure, path: Path) -> None:
     fig.savefig(path, dpi=FIG_DPI, format="png", metadata=PNG_METADATA)
 
 
-def _outline(mask: np.ndarray) -> np.ndarray:
+def outline(mask: np.ndarray) -> np.ndarray:
     """Box pixels next to a pixel of another mask value (a one-pixel outline inside each box)."""
     m = mask.astype(np.int32)
     edge = np.zeros(m.shape, dtype=bool)
@@ -98,7 +99,7 @@ def figure_sample_depth(gen_dir: Path, num: int, path: Path) -> tuple[str | None
         ax_d, ax_m = axes[r, 2 * c], axes[r, 2 * c + 1]
         depth = np.where(scene.depth_m > 0, scene.depth_m, np.nan)
         im = ax_d.imshow(depth, cmap=cmap, vmin=vmin, vmax=vmax, interpolation="nearest")
-        edge = _outline(scene.mask)
+        edge = outline(scene.mask)
         overlay = np.zeros(edge.shape + (4,))
         overlay[edge] = (1.0, 1.0, 1.0, 0.9)
         ax_d.imshow(overlay, interpolation="nearest")

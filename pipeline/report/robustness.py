@@ -1,0 +1,363 @@
+"""Robustness section (Secs. 8.4, 8.5): sensor noise and the paper's failure cases, from the
+robustness artifact (``data/robustness/<version>``, ``report.robustness_version``; optional;
+``pipeline.robustness``), read from its ``robustness.json``.
+
+Tables ``robustness_sensor_model``, ``robustness_table1`` / ``robustness_table2`` (Tables 1 and
+2 per network and input), ``robustness_closed_loop`` (the closed-loop variants),
+``robustness_policies`` (Sec. 8.4's policies against the paper's) and ``robustness_failures``.
+Figure ``robustness_depth.png``: the ideal, sensor-model and filtered depth of the first test
+image of the study's noisy generation artifact (its ``artifacts.generate_noisy``), when that
+artifact is under ``data/generate/``; the figure's filter (``conf/depth_filter/fill_median.yaml``)
+and whether the generation artifact was found are part of the report's version key
+(``config.robustness_figure``).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from omegaconf import DictConfig, OmegaConf
+
+from pipeline.artifacts import ArtifactError, check_artifact
+from pipeline.cli import CONF_DIR
+from pipeline.report.baseline import TABLE2_SECTION
+from pipeline.report.figures import figure_sensor_depth
+from pipeline.report.section import Context, Section
+from pipeline.report.tables import Table, integer, number, times, within_key
+from pipeline.report.training import TABLE1_COLUMNS, TABLE1_SECTION
+from pipeline.report.upstream import ArtifactInfo, resolve_upstream
+
+ROBUSTNESS_SECTION = "Robustness: sensor noise and the failure cases (Secs. 8.4, 8.5)"
+ROBUSTNESS_NOT_RUN = ("Robustness study: not run yet (`make robustness`, i.e. "
+                      "`python -m pipeline.robustness`).")
+ROBUSTNESS_KEYS = ("table1", "table2", "closed_loop", "sensor", "artifacts")
+ROBUSTNESS_FIGURE = "figures/robustness_depth.png"
+ROBUSTNESS_FIGURE_FILTER = "fill_median"  # conf/depth_filter/<name>.yaml, the figure's 3rd panel
+MODEL_LABELS = {"clean": "clean-trained", "noisy": "noisy-trained"}
+ROBUSTNESS_PLANNERS = {"dcnn_clean": "ours (DCNN), clean-trained",
+                       "dcnn_noisy": "ours (DCNN), noisy-trained",
+                       "gqcnn": "Dex-Net-style GQ-CNN + CEM",
+                       "planarity": "Dex-Net-style planarity + CEM"}
+REFERENCE_POLICY = "paper"  # the policy rows are compared with this variant
+SENSOR_MEANING = {  # pipeline.camera.sensor's parameters (SensorConfig); metres and degrees
+    "name": "the sensor model (`conf/sensor/<name>.yaml`)",
+    "enabled": "whether the model is applied (false: ideal depth)",
+    "noise_sigma_0": "σ0 (m) of the axial noise "
+                     "σ(z, θ) = σ0 + σ2·z² + σθ/√z · θ²/(π/2 − θ)²",
+    "noise_sigma_2": "σ2 (m per m²): the noise growing with the square of depth",
+    "noise_sigma_theta": "σθ (m·√m): the noise growing at grazing incidence θ",
+    "projector_baseline": "projector–camera distance along x (m): projector shadows beside "
+                          "depth steps",
+    "dropout_angle_start_deg": "incidence angle (°) where steep-surface dropout starts",
+    "dropout_angle_deg": "incidence angle (°) from which steep-surface dropout is certain",
+    "min_range": "no data nearer than this (m)",
+    "max_range": "no data farther than this (m)",
+    "edge_jump": "a depth step between 4-neighbours (m)",
+    "edge_dropout_prob": "chance that a pixel at such a step has no data",
+    "quantisation_step": "depth unit (m)",
+}
+
+
+@dataclass
+class RobustnessInfo(ArtifactInfo):
+    """The robustness artifact: folder, manifest and its ``robustness.json`` (``data``).
+
+    ``generation`` (the study's noisy generation artifact, drawn in the depth figure; None when
+    it is not under ``data/generate/``) and ``filter_cfg`` (the figure's depth filter) are set
+    by ``RobustnessSection.configure``."""
+
+    data: dict = field(default_factory=dict)
+    generation: Path | None = None
+    filter_cfg: DictConfig | None = None
+
+    @classmethod
+    def load(cls, folder: Path, manifest: dict) -> RobustnessInfo:
+        """Raises ``ArtifactError`` when ``robustness.json`` is missing or lacks the tables, the
+        sensor model or the artifact versions."""
+        try:
+            # Python's json reads the NaN the study writes for undefined rates.
+            data = json.loads((folder / "robustness.json").read_text())
+            complete = (isinstance(data, dict) and set(ROBUSTNESS_KEYS) <= set(data)
+                        and all(isinstance(data[k], list) for k in ROBUSTNESS_KEYS[:3])
+                        and all(isinstance(data[k], dict) for k in ROBUSTNESS_KEYS[3:]))
+        except (OSError, ValueError):
+            complete = False
+        if not complete:
+            raise ArtifactError(
+                f"{folder.name}/robustness.json (robustness) is missing or lacks "
+                f"{' / '.join(ROBUSTNESS_KEYS)}: recompute it with `make robustness` "
+                "(robustness.force=true).")
+        return cls(folder, manifest, data)
+
+
+def resolve_robustness(root: Path, version: str) -> RobustnessInfo | None:
+    """The robustness artifact to report, or None when ``version`` is "latest" and none exists.
+
+    Raises ``ArtifactError`` when a named version does not exist or when its ``robustness.json``
+    lacks the tables, the sensor model or the artifact versions.
+    """
+    return resolve_upstream(root, "robustness", version, RobustnessInfo.load)
+
+
+def robustness_generation(root: Path, info: RobustnessInfo) -> Path | None:
+    """The study's noisy generation artifact (drawn in the depth figure), None when it is not
+    under ``root``; an artifact whose files do not match its manifest is an error."""
+    version = info.data["artifacts"].get("generate_noisy")
+    if not version:
+        return None
+    folder = Path(root) / "generate" / str(version)
+    if not (folder / "manifest.json").is_file():
+        return None
+    return check_artifact(folder.resolve(), "report.robustness_version")
+
+
+def filter_config(name: str) -> DictConfig:
+    """``conf/depth_filter/<name>.yaml``."""
+    return OmegaConf.load(Path(CONF_DIR) / "depth_filter" / f"{name}.yaml")
+
+
+def robustness_table1_table(info: RobustnessInfo) -> Table:
+    """Table 1 of each network on each input (percent; CSV with 4 decimals)."""
+    headers = ["network", "input", *(h for _, h in TABLE1_COLUMNS), "predictions", "images"]
+    rows = [[MODEL_LABELS.get(str(r.get("model")), str(r.get("model"))), str(r.get("input")),
+             *(times(r.get(k)) for k, _ in TABLE1_COLUMNS), integer(r.get("predictions")),
+             integer(r.get("images"))] for r in info.data["table1"]]
+    n = len(TABLE1_COLUMNS)
+    return Table("robustness_table1", headers, rows, ["", ""] + ["{:.2f} %"] * n + ["{}", "{}"],
+                 csv_formats=["", ""] + ["{:.4f}"] * n + ["{}", "{}"], text_columns=2)
+
+
+def robustness_table2_table(info: RobustnessInfo) -> Table:
+    """Table 2 of each planner on each input: share of images within the radius (percent)."""
+    rows_in = info.data["table2"]
+    key, radius = within_key(rows_in)
+    headers = ["planner", "input", "images", f"within {radius} px", "no grasp",
+               "median distance (px)"]
+    rows = [[ROBUSTNESS_PLANNERS.get(str(r.get("planner")), str(r.get("planner"))),
+             str(r.get("input")), integer(r.get("images")), times(r.get(key)),
+             integer(r.get("no_grasp")), number(r.get("median_distance_px"))] for r in rows_in]
+    return Table("robustness_table2", headers, rows,
+                 ["", "", "{}", "{:.2f} %", "{}", "{:.1f}"],
+                 csv_formats=["", "", "{}", "{:.4f}", "{}", "{:.3f}"], text_columns=2)
+
+
+def _ratio(num: Any, den: Any) -> str | None:
+    a, b = integer(num), integer(den)
+    return None if a is None or b is None else f"{a}/{b}"
+
+
+def _closed_loop_row(r: dict) -> list[Any]:
+    return [str(r.get("variant")), MODEL_LABELS.get(str(r.get("model")), str(r.get("model"))),
+            str(r.get("overrides") or "-"), times(r.get("success_rate")),
+            _ratio(r.get("successes"), r.get("attempts")),
+            _ratio(r.get("picked"), r.get("boxes")),
+            number(r.get("pph_motion"))]
+
+
+CLOSED_LOOP_HEADERS = ["variant", "network", "overrides", "success rate",
+                       "successes / attempts", "picked / boxes", "PPH (motion only)"]
+
+
+def robustness_closed_loop_table(info: RobustnessInfo) -> Table:
+    """The closed-loop variants of the sensor study (group ``sensor``)."""
+    rows = [_closed_loop_row(r) for r in info.data["closed_loop"] if r.get("group") == "sensor"]
+    return Table("robustness_closed_loop", CLOSED_LOOP_HEADERS, rows,
+                 ["", "", "", "{:.1f} %", "", "", "{:.1f}"],
+                 csv_formats=["", "", "", "{:.4f}", "", "", "{:.1f}"], text_columns=3)
+
+
+def robustness_policies_table(info: RobustnessInfo) -> Table:
+    """Sec. 8.4's policies (group ``policy``), with the change in success rate (percentage
+    points) and PPH against the ``paper`` row; that row itself shows none."""
+    policy = [r for r in info.data["closed_loop"] if r.get("group") == "policy"]
+    ref = next((r for r in policy if r.get("variant") == REFERENCE_POLICY), None)
+    ref_rate = times(ref.get("success_rate")) if ref is not None else None
+    ref_pph = number(ref.get("pph_motion")) if ref is not None else None
+    rows = []
+    for r in policy:
+        row = _closed_loop_row(r)
+        rate, pph = row[3], row[6]
+        own = r is ref
+        row += [None if own or rate is None or ref_rate is None else rate - ref_rate,
+                None if own or pph is None or ref_pph is None else pph - ref_pph]
+        rows.append(row)
+    headers = CLOSED_LOOP_HEADERS + [f"success rate vs. {REFERENCE_POLICY} (pp)",
+                                     f"PPH vs. {REFERENCE_POLICY}"]
+    return Table("robustness_policies", headers, rows,
+                 ["", "", "", "{:.1f} %", "", "", "{:.1f}", "{:+.1f}", "{:+.1f}"],
+                 csv_formats=["", "", "", "{:.4f}", "", "", "{:.1f}", "{:.4f}", "{:.1f}"],
+                 text_columns=3)
+
+
+def robustness_failures_table(info: RobustnessInfo) -> Table:
+    """Failed attempts by kind of every closed-loop variant (the ``fail_*`` columns)."""
+    rows_in = info.data["closed_loop"]
+    kinds = list(dict.fromkeys(k for r in rows_in for k in r if k.startswith("fail_")))
+    rows = [[str(r.get("group")), str(r.get("variant")), *(integer(r.get(k)) for k in kinds)]
+            for r in rows_in]
+    return Table("robustness_failures", ["group", "variant", *(k[5:] for k in kinds)], rows,
+                 text_columns=2)
+
+
+def _param_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return f"{value:g}"
+    return str(value)
+
+
+def robustness_sensor_table(info: RobustnessInfo) -> Table:
+    """The sensor model's parameters, as the study recorded them."""
+    rows = [[k, _param_value(v), SENSOR_MEANING.get(k)] for k, v in info.data["sensor"].items()]
+    return Table("robustness_sensor_model", ["parameter", "value", "meaning"], rows,
+                 text_columns=3)
+
+
+def _input_meaning(name: str) -> str:
+    if name == "ideal":
+        return "*ideal*: the renderer's depth"
+    if name == "sensor":
+        return "*sensor*: the sensor model's depth"
+    head, _, filt = name.partition("+")
+    if head == "sensor" and filt:
+        return (f"*{name}*: the sensor model's depth after `conf/depth_filter/{filt}.yaml` "
+                "(`pipeline/camera/depth_filter.py`)")
+    return f"*{name}*"
+
+
+def missing_figure_note(info: RobustnessInfo) -> str:
+    """Why the depth figure was not drawn: no such generation artifact, or no test image."""
+    return (
+        f"No depth figure: the study's noisy generation artifact "
+        f"`{info.data['artifacts'].get('generate_noisy')}` "
+        + ("has no test images." if info.generation is not None else
+           "is not under `data/generate/` (rerun `make robustness`, which "
+           "recreates it, then the report)."))
+
+
+def render_robustness(info: RobustnessInfo | None, tables: dict[str, Table],
+                      figure: str | None, figure_note: str | None = None) -> list[str]:
+    """README lines of the robustness section (``figure``: the depth figure, if drawn;
+    ``figure_note``: why it was not)."""
+    out = [f"## {ROBUSTNESS_SECTION}", ""]
+    if info is None:
+        return out + [ROBUSTNESS_NOT_RUN, ""]
+    data = info.data
+    cfg = (info.manifest.get("config") or {}).get("robustness") or {}
+    sensor = data["sensor"].get("name", cfg.get("sensor"))
+    arts = data["artifacts"]
+    inputs = list(dict.fromkeys(str(r.get("input")) for r in data["table1"] + data["table2"]))
+    images = sorted({integer(r.get("images")) for r in data["table1"]} - {None})
+    trials = cfg.get("closed_loop_trials")
+    out += [
+        f"Robustness artifact `{info.version}` (`python -m pipeline.robustness`): the method on "
+        f"depth from the `{sensor}` sensor model instead of the ideal rendered depth, with a "
+        "network trained on ideal depth (*clean-trained*, train artifact "
+        f"`{arts.get('train_clean')}`) and one trained on the sensor's depth (*noisy-trained*, "
+        f"`{arts.get('train_noisy')}`). Tables 1 and 2 are measured on the test split of the "
+        f"noisy generation artifact `{arts.get('generate_noisy')}`"
+        + (f" ({', '.join(str(n) for n in images)} images)" if images else "")
+        + ", the same heaps as the clean one; the labels come from the ideal depth, so they "
+        "are the same for every input. Inputs: " + "; ".join(_input_meaning(n) for n in inputs)
+        + ". The closed-loop variants are ordinary evaluation artifacts of the DCNN planner"
+        + (f" ({trials} trial{'' if trials == 1 else 's'} each)" if trials is not None else "")
+        + ", all on the same heaps and seeds; they differ only in the overrides shown.",
+        "",
+        "### Sensor model",
+        "",
+        f"The parameters of `conf/sensor/{sensor}.yaml` as the study used them "
+        "(`pipeline/camera/sensor.py`).",
+        "",
+        tables["robustness_sensor_model"].markdown(),
+    ]
+    if figure:
+        out += ["The first test image's ideal depth, its depth from this model and that depth "
+                f"after `depth_filter={ROBUSTNESS_FIGURE_FILTER}`: [{figure}]({figure}).", ""]
+    elif figure_note:
+        out += [figure_note, ""]
+    out += [
+        "### Sensor noise: Table 1",
+        "",
+        "Precision (%) of each network's predictions per input (Table 1's definition, "
+        f"\"{TABLE1_SECTION}\").",
+        "",
+        tables["robustness_table1"].markdown(),
+        "### Sensor noise: Table 2",
+        "",
+        "Share of test images whose optimal grasp point lies within the radius of a true "
+        "surface centre, per planner and input (Table 2's measure, "
+        f"\"{TABLE2_SECTION}\"; an image without a grasp counts as a miss).",
+        "",
+        tables["robustness_table2"].markdown(),
+        "### Sensor noise: closed loop",
+        "",
+        "Success rate = successful grasps / attempts; PPH = successful picks per hour of "
+        "simulated robot motion (as in Table 3).",
+        "",
+        tables["robustness_closed_loop"].markdown(),
+        "### Sec. 8.4 failure cases: closed loop",
+        "",
+        "The paper's proposed fixes of its failure cases on ideal depth, each against the "
+        f"paper's policy (the `{REFERENCE_POLICY}` row): differences in success rate are "
+        "percentage points, in PPH picks per hour.",
+        "",
+        tables["robustness_policies"].markdown(),
+        "Failed attempts by kind (see Table 3's list):",
+        "",
+        tables["robustness_failures"].markdown(),
+        "CSV versions: "
+        + ", ".join(f"[tables/{n}.csv](tables/{n}.csv)" for n in (
+            "robustness_sensor_model", "robustness_table1", "robustness_table2",
+            "robustness_closed_loop", "robustness_policies", "robustness_failures")) + ".",
+        "",
+    ]
+    return out
+
+
+class RobustnessSection(Section):
+    name = "robustness"
+
+    def resolve(self, ctx: Context) -> RobustnessInfo | None:
+        return resolve_robustness(ctx.root, ctx.requested("robustness"))
+
+    def configure(self, info: RobustnessInfo, ctx: Context) -> dict[str, Any]:
+        """What the depth figure reads besides the artifacts: the filter's parameters, and
+        whether the study's noisy generation artifact is there to draw from."""
+        info.generation = robustness_generation(ctx.root, info)
+        info.filter_cfg = filter_config(ROBUSTNESS_FIGURE_FILTER)
+        return {"robustness_figure": {
+            "generate": info.generation.name if info.generation is not None else None,
+            "depth_filter": OmegaConf.to_container(info.filter_cfg, resolve=True)}}
+
+    def tables(self, info: RobustnessInfo, ctx: Context) -> list[Table]:
+        return [robustness_sensor_table(info), robustness_table1_table(info),
+                robustness_table2_table(info), robustness_closed_loop_table(info),
+                robustness_policies_table(info), robustness_failures_table(info)]
+
+    def figures(self, info: RobustnessInfo, ctx: Context, folder: Path) -> dict[str, str]:
+        gen_noisy = info.data["artifacts"].get("generate_noisy")
+        sensor = info.data["sensor"].get("name", "sensor")
+        drawn = None
+        if info.generation is not None:
+            drawn = figure_sensor_depth(info.generation, info.filter_cfg,
+                                        ROBUSTNESS_FIGURE_FILTER, str(sensor),
+                                        folder / ROBUSTNESS_FIGURE)
+        if drawn is None:
+            (folder / ROBUSTNESS_FIGURE).unlink(missing_ok=True)
+            return {}
+        return {ROBUSTNESS_FIGURE: (
+            f"Test image #{drawn} of generation artifact `{gen_noisy}` (the robustness "
+            f"study's noisy generation): the ideal depth, the `{sensor}` model's depth "
+            f"and that depth after `depth_filter={ROBUSTNESS_FIGURE_FILTER}` (magenta: "
+            "no data; one colour scale).")}
+
+    def markdown(self, info: RobustnessInfo | None, tables: dict[str, Table],
+                 figures: dict[str, str]) -> list[str]:
+        if info is not None and ROBUSTNESS_FIGURE not in figures:
+            return render_robustness(info, tables, None, missing_figure_note(info))
+        return render_robustness(info, tables,
+                                 ROBUSTNESS_FIGURE if ROBUSTNESS_FIGURE in figures else None)

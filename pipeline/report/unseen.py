@@ -1,0 +1,104 @@
+"""Unseen-sizes section: Tables 1 and 2 on box sizes not seen in training, from the unseen-size
+artifact (``data/unseen/<version>``, ``report.unseen_version``; optional; ``pipeline.unseen``).
+
+Tables ``unseen_table1`` (precision of the trained network, percent) and ``unseen_table2``
+(every planner's share of optimal grasp points within the radius, pixels), each on the seen- and
+the unseen-size test split. No figure.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pipeline.artifacts import ArtifactError
+from pipeline.report.section import Context, Section
+from pipeline.report.tables import Table, integer, number, times, within_key
+from pipeline.report.upstream import ArtifactInfo, resolve_upstream
+
+UNSEEN_SECTION = "Unseen box sizes: Tables 1 and 2 on boxes not seen in training"
+UNSEEN_NOT_RUN = "Unseen box sizes: not run yet (`make unseen`)."
+METRIC_LISTS = ("table1", "table2", "boxes")
+
+
+class UnseenInfo(ArtifactInfo):
+    """The unseen-size artifact: folder and manifest (``metrics.table1``, ``table2``: rows per
+    box-size set, ``boxes``: the unseen box types, sizes in metres)."""
+
+    @classmethod
+    def load(cls, folder: Path, manifest: dict) -> UnseenInfo:
+        """Raises ``ArtifactError`` when the manifest lacks the tables or the boxes."""
+        metrics = manifest.get("metrics") or {}
+        if not all(isinstance(metrics.get(k), list) for k in METRIC_LISTS):
+            raise ArtifactError(f"{folder.name}/manifest.json (unseen) lacks metrics.table1 / "
+                                "table2 / boxes; recompute it with `make unseen` "
+                                "(unseen.force=true).")
+        return cls(folder, manifest)
+
+
+def resolve_unseen(root: Path, version: str) -> UnseenInfo | None:
+    """The unseen-size artifact to report, or None when ``version`` is "latest" and none
+    exists."""
+    return resolve_upstream(root, "unseen", version, UnseenInfo.load)
+
+
+def unseen_table1(metrics: dict) -> Table:
+    """Table 1 of the trained network on the seen- and the unseen-size test split (percent)."""
+    keys = ("top1", "top1pct", "top5pct", "top10pct", "per_image_top1pct",
+            "per_image_top5pct", "per_image_top10pct")
+    headers = ["box sizes", "th", "Top 1", "Top 1 % (pooled)", "Top 5 % (pooled)",
+               "Top 10 % (pooled)", "Top 1 % (per image)", "Top 5 % (per image)",
+               "Top 10 % (per image)", "scored images", "no prediction"]
+    rows = [[r["set"], number(r.get("threshold")), *(times(r.get(k)) for k in keys),
+             integer(r.get("scored_images")), integer(r.get("no_prediction_images"))]
+            for r in metrics["table1"]]
+    return Table("unseen_table1", headers, rows,
+                 ["", "{:g}"] + ["{:.2f} %"] * len(keys) + ["{}", "{}"], text_columns=1)
+
+
+def unseen_table2(metrics: dict) -> Table:
+    """Table 2 of every planner on the seen- and the unseen-size test split (percent)."""
+    key, radius = within_key(metrics["table2"])
+    headers = ["box sizes", "planner", f"less than {radius} px", "images", "no grasp",
+               "median distance (px)"]
+    rows = [[r["set"], r.get("name", r["planner"]), times(r.get(key)), integer(r.get("images")),
+             integer(r.get("no_grasp")), number(r.get("median_distance_px"))]
+            for r in metrics["table2"]]
+    return Table("unseen_table2", headers, rows,
+                 ["", "", "{:.2f} %", "{}", "{}", "{:.1f}"], text_columns=2)
+
+
+def render_unseen(info: UnseenInfo | None, tables: dict[str, Table]) -> list[str]:
+    """README lines of the unseen-sizes section."""
+    out = [f"## {UNSEEN_SECTION}", ""]
+    if info is None:
+        return out + [UNSEEN_NOT_RUN, ""]
+    sizes = ", ".join(f"{b['name']} {' x '.join(f'{1000 * x:g}' for x in b['size'])} mm"
+                      for b in info.metrics["boxes"])
+    out += [
+        f"Unseen-size artifact `{info.version}` (`python -m pipeline.unseen`): the trained "
+        "network and the Dex-Net-style planners, all trained on the three training sizes, on a "
+        f"test split of heaps of other boxes ({sizes}), beside the same tables on the training "
+        "sizes' test split (*seen*, from the train and baseline artifacts). Definitions as in "
+        "Tables 1 and 2 above; the network plans at its calibrated th.",
+        "",
+        tables["unseen_table1"].markdown(),
+        tables["unseen_table2"].markdown(),
+        "CSV versions: [tables/unseen_table1.csv](tables/unseen_table1.csv), "
+        "[tables/unseen_table2.csv](tables/unseen_table2.csv).",
+        "",
+    ]
+    return out
+
+
+class UnseenSection(Section):
+    name = "unseen"
+
+    def resolve(self, ctx: Context) -> UnseenInfo | None:
+        return resolve_unseen(ctx.root, ctx.requested("unseen"))
+
+    def tables(self, info: UnseenInfo, ctx: Context) -> list[Table]:
+        return [unseen_table1(info.metrics), unseen_table2(info.metrics)]
+
+    def markdown(self, info: UnseenInfo | None, tables: dict[str, Table],
+                 figures: dict[str, str]) -> list[str]:
+        return render_unseen(info, tables)
