@@ -2,7 +2,7 @@
 
     python -m pipeline.ablation [experiment=default] [ablation.planners=[oracle,dcnn]]
 
-Each variant of ``ablation.variants`` (``conf/ablation.yaml``) is one run of the evaluation
+Each variant of ``ablation.variants`` (``conf/stage/ablation.yaml``) is one run of the evaluation
 stage with the variant's overrides, for each planner of ``ablation.planners`` and
 ``ablation.trials`` trials, on the evaluation's own heaps (they depend only on ``seed`` and the
 trial index). Every run is an evaluation artifact of its own (reused when its version exists);

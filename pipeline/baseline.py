@@ -54,7 +54,7 @@ from pipeline.cli import CONF_DIR, data_root, stage_main
 from pipeline.dataset.pixels import pixels_to_points
 from pipeline.dataset.scenes import SPLIT_CODES, SPLITS, Scene, SceneDataset
 from pipeline.dataset.storage import read_npz, write_npz
-from pipeline.dexnet.contact import REASONS, SuctionModelConfig, evaluate_contacts, robust_quality
+from pipeline.dexnet.contact import REASONS, evaluate_contacts, robust_quality, suction_model_config
 from pipeline.dexnet.gqcnn import GQCNN, candidate_inputs, count_parameters, predict_quality
 from pipeline.dexnet.planner import (
     MODEL_FILE, DexNetPlanner, crop_config, gqcnn_config, sampler_config, workspace,
@@ -96,17 +96,6 @@ CANDIDATE_FIELDS = {
 # Candidate labels
 
 
-def suction_config(cfg) -> SuctionModelConfig:
-    s = cfg.suction
-    return SuctionModelConfig(
-        cup_radius=float(cfg.hand.cup_diameter) / 2.0, vacuum_force=float(s.vacuum_force),
-        friction=float(s.friction), compliance=float(s.compliance),
-        ring_points=int(s.ring_points), visibility_tolerance=float(s.visibility_tolerance),
-        gravity=abs(float(cfg.physics.gravity)), density=float(cfg.boxes.density),
-        perturbations=int(s.perturbations), sigma_position=float(s.sigma_position),
-        sigma_axis_deg=float(s.sigma_axis_deg), quality_threshold=float(s.quality_threshold))
-
-
 def gravity_in_camera(T_world_cam: np.ndarray) -> np.ndarray:
     """World gravity direction (0, 0, −1) in the camera frame: (3,) unit vector."""
     return np.asarray(T_world_cam, np.float64)[:3, :3].T @ np.array([0.0, 0.0, -1.0])
@@ -120,7 +109,7 @@ def label_scene_candidates(scene: Scene, cfg, count: int) -> dict[str, np.ndarra
     cloud = point_cloud_image(scene.depth_m, scene.intrinsics, sampler_config(cfg),
                               object_mask=mask)
     cands = sample_candidates(cloud, count, rng, sampler_config(cfg))
-    model = suction_config(cfg)
+    model = suction_model_config(cfg, float(cfg.boxes.density))
     g = gravity_in_camera(scene.T_world_cam)
     # candidates come from what the sensor saw; their labels from the ideal depth (the geometry)
     args = (scene.depth_clean_m, scene.mask, scene.intrinsics, scene.boxes, g, model)

@@ -252,11 +252,12 @@ def executor_figures(num_scenes: int, num_tasks: int = 200) -> dict[str, float]:
     """The executors: per trivial task overhead and worker start-up, local and Ray, 1 and 2
     workers; Ray's start-up (a private 2-CPU instance); generation and labelling throughput with
     1 and 2 workers under both (``stage_rates``)."""
-    from pipeline.config.schema import ExecutorConfig
+    from pipeline.cli import compose
     from pipeline.executor import import_ray, start_ray
 
     out: dict[str, float] = {}
-    local, ray_cfg = ExecutorConfig(name="local"), ExecutorConfig(name="ray", address=None)
+    local, ray_cfg = (compose("generate", [f"executor={name}"]).executor for name in ("local", "ray"))
+    ray_cfg.address = None  # a private instance, whatever RAY_ADDRESS says
     for workers in (1, 2):
         start, per_task = executor_overhead(local, workers, num_tasks)
         out[f"local_{workers}w_ms_per_task"], out[f"local_{workers}w_start_s"] = per_task, start
@@ -545,7 +546,7 @@ def closed_loop_figures(cfg_name: str = "evaluate", renderer: str | None = None,
     from pipeline.picking.cell import PickCell
     from pipeline.picking.trial import PickRunner
     from pipeline.robot.model import Robot
-    from pipeline.servo.descriptor import DescriptorConfig, describe_surface
+    from pipeline.servo.descriptor import describe_surface
 
     torch.set_num_threads(1)
     extra = [f"camera.renderer={renderer}"] if renderer else []
@@ -560,7 +561,7 @@ def closed_loop_figures(cfg_name: str = "evaluate", renderer: str | None = None,
         frame = cell.render()
         ys, xs = np.nonzero(np.isin(frame.body_ids, list(cell.boxes)))
         seed = np.array([xs[len(xs) // 2], ys[len(ys) // 2]], np.float64)
-        dcfg = DescriptorConfig()
+        dcfg = runner.descriptor_cfg  # conf/servo/, as the closed loop uses it
         times = []
         for _ in range(20):
             t0 = time.perf_counter()

@@ -19,6 +19,15 @@ SMOKE_SCENES = ("generate.num_scenes=4", "generate.num_val_scenes=1", "generate.
                 "train.device=cpu")
 
 
+def conf_section(name: str, *overrides: str):
+    """The ``name`` section of the composed configuration (``conf/``, the smoke experiment) as its
+    schema dataclass, e.g. ``conf_section("hand")`` → ``HandConfig``: the values live in YAML
+    only, so tests take them from there."""
+    from omegaconf import OmegaConf
+
+    return OmegaConf.to_object(compose("generate", ["experiment=smoke", *overrides])[name])
+
+
 def smoke_overrides(root: Path, *extra: str) -> list[str]:
     """Overrides of a smoke config rooted in ``root`` with the session pipeline's scene counts."""
     return ["experiment=smoke", f"paths.root={root}", "logging.progress=false", *SMOKE_SCENES,

@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 from hydra.errors import ConfigCompositionException
 
+from conftest import conf_section
 from pipeline.cli import compose
-from pipeline.config.schema import ExecutorConfig
 from pipeline.executor import RAY_INSTALL_HINT, import_ray, map_shards, start_ray
 from pipeline.generate import generate
 from pipeline.label import label
@@ -25,7 +25,7 @@ ray = pytest.importorskip("ray")
 TINY = ("generate.num_scenes=3", "generate.num_val_scenes=1", "generate.num_test_scenes=1",
         "generate.scenes_per_shard=2", "logging.max_logged_scenes=2", "logging.progress=false")
 RUNS = (("local", 1), ("local", 2), ("ray", 2))
-RAY = ExecutorConfig(name="ray")
+RAY = conf_section("executor", "executor=ray")
 
 
 def _cfg(stage: str, root: Path, executor: str, workers: int, *extra: str):

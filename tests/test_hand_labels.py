@@ -2,17 +2,19 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
-from pipeline.config.schema import HandConfig
+from conftest import conf_section
 from pipeline.labelling.hand import (
     camera_centre, hand_label, rotation_between,
 )
 from pipeline.robot.target_pose import target_camera_pose
 from pipeline.labelling.types import GraspClass, Surface
 
-CFG = HandConfig()  # cups: r = 9 mm, offset 35 mm, margin 2 mm, area ratio 1.2
+CFG = conf_section("hand")  # conf/hand/two_cup.yaml: cups: r = 9 mm, offset 35 mm, margin 2 mm, area ratio 1.2
 
 
 def surface(long_axis, normal, L_l, L_s, center=(0.0, 0.0, 0.6)):
@@ -76,7 +78,7 @@ def test_area_ratio_rejects_a_face_barely_larger_than_a_cup():
     # 0.023 × 0.0135 m: a cup fits geometrically? half-widths 0.0115, 0.00675 < 0.011 → no.
     # 0.024 × 0.024: fits (0.012 ≥ 0.011); area 5.76e-4 ≥ 1.2 × 2.545e-4 = 3.05e-4 → L.
     assert hand_label(surface([1, 0, 0], [0, 0, -1], 0.024, 0.024), CFG).grasp_class == GraspClass.L
-    strict = HandConfig(min_area_ratio=2.5)  # 2.5 × 2.545e-4 = 6.36e-4 > 5.76e-4 → NG
+    strict = dataclasses.replace(CFG, min_area_ratio=2.5)  # 2.5 × 2.545e-4 = 6.36e-4 > 5.76e-4 → NG
     assert hand_label(surface([1, 0, 0], [0, 0, -1], 0.024, 0.024), strict).grasp_class == GraspClass.NG
 
 

@@ -10,7 +10,7 @@ import pybullet as p
 import pytest
 
 from pipeline.camera.geometry import camera_pose_above_bin
-from pipeline.config.schema import BinConfig, PhysicsConfig
+from conftest import conf_section
 from pipeline.robot import (CUP_DIAMETER, CUP_OFFSET, CUP_TIP_Z, URDF_PATH, Robot, RobotConfig,
                             build_urdf_xml, rotation_angle_deg, target_camera_pose)
 from pipeline.simulation.heap import build_cell
@@ -23,8 +23,8 @@ DOWN = np.array([[1.0, 0, 0], [0, -1, 0], [0, 0, -1]])  # camera axes looking st
 def cell():
     """A pybullet client with the paper's bin and the robot beside it."""
     client = p.connect(p.DIRECT)
-    bin_cfg = BinConfig()
-    bodies = build_cell(client, bin_cfg, PhysicsConfig())
+    bin_cfg = conf_section("bin")
+    bodies = build_cell(client, bin_cfg, conf_section("physics"))
     robot = Robot(RobotConfig())
     robot.load(client, ground_z=-bin_cfg.floor_thickness)
     yield client, robot, bodies

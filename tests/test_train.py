@@ -11,9 +11,8 @@ import torch
 from pipeline.artifacts import load_manifest, verify_artifact
 from pipeline.artifacts.fingerprint import sha256_file
 from pipeline.camera.geometry import Intrinsics
-from conftest import smoke_overrides
+from conftest import conf_section, smoke_overrides
 from pipeline.cli import compose
-from pipeline.config.schema import HandConfig
 from pipeline.labelling.hand import hand_label
 from pipeline.labelling.types import GraspClass, Surface
 from pipeline.planner.augment import flip_image, flip_rows
@@ -148,7 +147,7 @@ def _rows(surface: Surface, hand: HandConfig) -> dict:
 
 
 def test_flip_labels_hand_cases():
-    hand = HandConfig()
+    hand = conf_section("hand")
     tilted = _rows(_face(-20.0), hand)  # the R camera centre is ~2.4 cm higher
     assert tilted["grasp_class"][0] == R
     v = flip_rows(tilted, "v", INTR, hand)

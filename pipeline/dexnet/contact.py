@@ -65,6 +65,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.camera.geometry import Intrinsics
+from pipeline.config.build import from_section
 
 # Reason codes of ContactResult.reason: REASONS[code] is its name.
 REASONS = ("ok", "not_on_box", "off_face", "uneven", "occluded", "pull", "shear", "torsion",
@@ -108,6 +109,15 @@ class SuctionModelConfig:
     sigma_position: float = 0.002
     sigma_axis_deg: float = 5.0
     quality_threshold: float = 0.5
+
+
+def suction_model_config(cfg, density: float) -> SuctionModelConfig:
+    """The suction contact model of a composed config: ``conf/suction/`` with the cup radius
+    (``hand.cup_diameter`` / 2), g (``|physics.gravity|``) and the boxes' ``density`` (kg/m³:
+    ``boxes.density`` for generated heaps, ``eval_boxes.density`` for the closed loop's boxes)."""
+    return from_section(SuctionModelConfig, cfg.suction,
+                        cup_radius=float(cfg.hand.cup_diameter) / 2.0,
+                        gravity=abs(float(cfg.physics.gravity)), density=float(density))
 
 
 @dataclass

@@ -42,6 +42,7 @@ import numpy as np
 
 from pipeline.camera.depth_input import check_depth_image
 from pipeline.camera.geometry import Intrinsics
+from pipeline.config.build import from_section
 from pipeline.dexnet.cem import CEMConfig, CEMResult, cross_entropy_method
 from pipeline.dexnet.gqcnn import (
     GQCNN, CropConfig, GQCNNConfig, candidate_inputs, predict_quality,
@@ -104,19 +105,13 @@ class Workspace:
 
 
 def sampler_config(cfg) -> SamplerConfig:
-    d = cfg.dexnet
-    return SamplerConfig(border_px=int(d.border_px),
-                         max_approach_angle_deg=float(d.max_approach_angle_deg),
-                         max_tries=int(d.max_tries), sobel_ksize=int(d.sobel_ksize))
+    """The candidate sampler of a composed config (``conf/dexnet/``)."""
+    return from_section(SamplerConfig, cfg.dexnet)
 
 
 def cem_config(cfg) -> CEMConfig:
-    d = cfg.dexnet
-    return CEMConfig(num_seed_samples=int(d.num_seed_samples),
-                     num_gmm_samples=int(d.num_gmm_samples), num_iters=int(d.num_iters),
-                     gmm_refit_p=float(d.gmm_refit_p),
-                     gmm_component_frac=float(d.gmm_component_frac),
-                     gmm_reg_covar=float(d.gmm_reg_covar), max_resamples=int(d.max_resamples))
+    """The cross-entropy method of a composed config (``conf/dexnet/``)."""
+    return from_section(CEMConfig, cfg.dexnet)
 
 
 def crop_config(cfg) -> CropConfig:
@@ -129,8 +124,8 @@ def crop_config(cfg) -> CropConfig:
 
 
 def gqcnn_config(cfg) -> GQCNNConfig:
-    d = cfg.dexnet
-    return GQCNNConfig(crop_size=int(d.crop_size), width=int(d.width), fc=int(d.fc))
+    """The GQ-CNN's architecture of a composed config (``conf/dexnet/``)."""
+    return from_section(GQCNNConfig, cfg.dexnet)
 
 
 def planarity_config(cfg) -> PlanarityConfig:

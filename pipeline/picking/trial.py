@@ -166,29 +166,17 @@ class PickRunner:
 
     def __init__(self, cfg, cell: PickCell, planner, planner_name: str) -> None:
         from pipeline.picking.suction import SuctionGripper
-        from pipeline.dexnet.contact import SuctionModelConfig
+        from pipeline.config.build import from_section
+        from pipeline.dexnet.contact import suction_model_config
         from pipeline.servo.control import servo_config
         from pipeline.servo.descriptor import DescriptorConfig
 
         self.cfg, self.cell, self.planner, self.name = cfg, cell, planner, planner_name
         s = cfg.servo
         self.dt = 1.0 / float(s.control_rate_hz)
-        self.descriptor_cfg = DescriptorConfig(window=int(s.window),
-                                               window_tolerance_depth=float(
-                                                   s.window_tolerance_depth),
-                                               seed_repair=bool(s.seed_repair),
-                                               track_normal_deg=float(s.track_normal_deg),
-                                               eps_distance=float(s.eps_distance),
-                                               eps_normal=float(s.eps_normal),
-                                               min_pixels=int(s.min_pixels),
-                                               normal_smoothing=int(s.normal_smoothing))
+        self.descriptor_cfg = from_section(DescriptorConfig, s)
         self.servo_cfg = servo_config(cfg)
-        su = cfg.suction
-        self.suction_cfg = SuctionModelConfig(
-            cup_radius=float(cfg.hand.cup_diameter) / 2.0, vacuum_force=float(su.vacuum_force),
-            friction=float(su.friction), compliance=float(su.compliance),
-            ring_points=int(su.ring_points), visibility_tolerance=float(su.visibility_tolerance),
-            gravity=abs(float(cfg.physics.gravity)), density=float(cfg.eval_boxes.density))
+        self.suction_cfg = suction_model_config(cfg, float(cfg.eval_boxes.density))
         self.gripper_factory = lambda: SuctionGripper(cell.client, cell.robot, self.suction_cfg,
                                                       float(cfg.hand.cup_offset))
         self._place_q: np.ndarray | None = None
