@@ -449,7 +449,13 @@ def test_table1_matches_train_manifest(root_a: Path, report_a: Path) -> None:
     net = manifest["metrics"]["network"]
     assert f"{net['parameters']:,} parameters" in section
     assert f"{net['macs_per_image']:,} multiply-accumulates" in section
-    assert f"{manifest['metrics']['images']['train']} training images for 1 epoch" in section
+    flip = manifest["config"]["train"]["augment_flip"]
+    assert (f"{manifest['metrics']['images']['train']} training images (each mirrored at random: "
+            f"`train.augment_flip={flip}`) for 1 epoch") in section
+    curve_csv = (root_a / "reports" / "tables" / "training_curve.csv").read_text().splitlines()
+    assert curve_csv[0] == "epoch,train loss,val loss,"
+    assert len(curve_csv) == 1 + len(manifest["metrics"]["train_loss_per_epoch"])
+    assert curve_csv[1].endswith(",model")  # one epoch: it is the model
     assert "images_per_s" not in section and "train_s" not in section
     paper_tables = _section(readme, "## Paper tables")
     assert "Table 1" in paper_tables and "reported above" in paper_tables

@@ -16,6 +16,7 @@ versioned artifact ``data/report/<version>/``::
     figures/labels_sample.png     test depth images with their grasp points coloured by class
     tables/table1_precision.csv   Table 1: precision top 1 / top 1 % / 5 % / 10 %, paper and ours
     tables/threshold_calibration.csv  the validation curve that chose th (Eq. 3)
+    tables/training_curve.csv     the training and validation loss per epoch
     figures/pr_curve.png          the DCNN's precision–recall curve on the test split
     tables/table2_centre_distance.csv  Table 2: optimal grasp points near surface centres
     tables/planning_time.csv      planning time per image of each planner (wall-clock)

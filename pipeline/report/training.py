@@ -3,8 +3,8 @@ validation curve that calibrated the threshold th (Eq. 3), from the train artifa
 (``models/train/<version>``, ``report.train_version``; optional). It must have been trained on
 the label artifact the report reads.
 
-Tables ``table1_precision`` (precision top 1 / top 1 % / 5 % / 10 %, the paper's and ours) and
-``threshold_calibration``; figure ``pr_curve.png`` (the DCNN's precision–recall curve on the
+Tables ``table1_precision`` (precision top 1 / top 1 % / 5 % / 10 %, the paper's and ours),
+``threshold_calibration`` and ``training_curve`` (the losses per epoch); figure ``pr_curve.png`` (the DCNN's precision–recall curve on the
 test split). Training timings are not copied.
 """
 
@@ -102,6 +102,20 @@ def threshold_table(trained: TrainInfo) -> Table | None:
                  ["{:g}"] + ["{:.2f} %"] * 5, csv_formats=["{:g}"] + ["{:.4f}"] * 5)
 
 
+def training_curve_table(trained: TrainInfo) -> Table | None:
+    """The loss per epoch (training and validation focal loss, Eqs. 4–6, per image), the epoch
+    the model is marked; None for an artifact without per-epoch losses."""
+    m = trained.metrics
+    train, val = m.get("train_loss_per_epoch"), m.get("val_loss_per_epoch")
+    if not train or val is None:
+        return None
+    best = m.get("best_epoch")
+    rows = [[e, tl, vl, "model" if e == best else ""]
+            for e, (tl, vl) in enumerate(zip(train, val), 1)]
+    return Table("training_curve", ["epoch", "train loss", "val loss", ""], rows,
+                 ["{}", "{:.4f}", "{:.4f}", ""], csv_formats=["{}", "{:.6f}", "{:.6f}", ""])
+
+
 def render_train(trained: TrainInfo | None, tables: dict[str, Table],
                  figure: str | None) -> list[str]:
     """README lines of the Table 1 section (``figure``: the PR-curve figure, if drawn)."""
@@ -115,6 +129,7 @@ def render_train(trained: TrainInfo | None, tables: dict[str, Table],
     radius = t1.get("radius_px", (cfg.get("train") or {}).get("match_radius_px"))
     images = m.get("images") or {}
     epochs = m.get("epochs", (cfg.get("train") or {}).get("epochs"))
+    flip = (cfg.get("train") or {}).get("augment_flip", "none")
     out += [
         f"Precision (%) of the DCNN of train artifact `{trained.version}` on the test split "
         f"({t1.get('num_images', images.get('test'))} images, "
@@ -159,14 +174,23 @@ def render_train(trained: TrainInfo | None, tables: dict[str, Table],
         f"Network: width multiplier {float(net['width']):g}, {int(net['parameters']):,} "
         f"parameters, {int(net['macs_per_image']):,} multiply-accumulates per image "
         f"({2 * int(net['macs_per_image']) / 1e9:.3f} GFLOPs, convolutions only). Trained on "
-        f"{images.get('train')} training images for {epochs} epoch"
+        f"{images.get('train')} training images"
+        + (f" (each mirrored at random: `train.augment_flip={flip}`)" if flip != "none" else "")
+        + f" for {epochs} epoch"
         f"{'' if epochs == 1 else 's'}" + (
             f" of at most {m['max_epochs']} (validation-based stopping, patience "
             f"{(cfg.get('train') or {}).get('patience')}); the model is epoch {m['best_epoch']}, "
             "the one with the lowest validation loss." if "best_epoch" in m else "."),
         "",
+    ]
+    if "training_curve" in tables:
+        out += ["Loss per epoch (focal loss per image; the model is the epoch marked):", "",
+                tables["training_curve"].markdown()]
+    out += [
         "CSV versions: [tables/table1_precision.csv](tables/table1_precision.csv), "
-        "[tables/threshold_calibration.csv](tables/threshold_calibration.csv)."
+        "[tables/threshold_calibration.csv](tables/threshold_calibration.csv)"
+        + (", [tables/training_curve.csv](tables/training_curve.csv)"
+           if "training_curve" in tables else "") + "."
         + (f" Precision–recall curve: [{figure}]({figure})." if figure else ""),
         "",
     ]
@@ -185,7 +209,8 @@ class TrainingSection(Section):
         return resolve_train(ctx.models, ctx.requested("train"), ctx.version("label"))
 
     def tables(self, info: TrainInfo, ctx: Context) -> list[Table]:
-        return [t for t in (table1_table(info), threshold_table(info)) if t is not None]
+        return [t for t in (table1_table(info), threshold_table(info), training_curve_table(info))
+                if t is not None]
 
     def figures(self, info: TrainInfo, ctx: Context, folder: Path) -> dict[str, str]:
         figure_pr_curve(info.metrics["pr_curve"], folder / PR_FIGURE)
