@@ -168,7 +168,7 @@ def _slab(origins: np.ndarray, dirs: np.ndarray,
     return np.where(hit, s_in, np.inf), face
 
 
-def _perpendicular_basis(axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def perpendicular_basis(axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unit vectors e1, e2, each (N, 3), with (e1, e2, a) a right-handed orthonormal frame for
     each unit axis a of the (N, 3) ``axes``."""
     helper = np.zeros_like(axes)
@@ -180,7 +180,8 @@ def _perpendicular_basis(axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return e1, np.cross(axes, e1)
 
 
-def _unit_rows(x: np.ndarray, name: str) -> np.ndarray:
+def unit_rows(x: np.ndarray, name: str) -> np.ndarray:
+    """``x`` (..., 3) with each row scaled to unit length; ValueError naming ``name`` for a zero row."""
     norm = np.linalg.norm(x, axis=-1, keepdims=True)
     if np.any(norm < 1e-9):
         raise ValueError(f"{name} has a zero-length vector")
@@ -208,7 +209,7 @@ def evaluate_contacts(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m: np.
         A ContactResult of (N,) arrays.
     """
     p = np.asarray(points_cam, dtype=np.float64).reshape(-1, 3)
-    a = _unit_rows(np.asarray(axes_cam, dtype=np.float64).reshape(-1, 3), "axes_cam")
+    a = unit_rows(np.asarray(axes_cam, dtype=np.float64).reshape(-1, 3), "axes_cam")
     if len(a) != len(p):
         raise ValueError(f"{len(p)} points but {len(a)} axes")
     shape = (intrinsics.height, intrinsics.width)
@@ -217,7 +218,7 @@ def evaluate_contacts(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m: np.
                          f"{shape}, the camera intrinsics' image size")
     if cfg.ring_points < 3:
         raise ValueError(f"ring_points must be >= 3, not {cfg.ring_points}")
-    g_dir = _unit_rows(np.asarray(gravity_cam, dtype=np.float64).reshape(3), "gravity_cam")
+    g_dir = unit_rows(np.asarray(gravity_cam, dtype=np.float64).reshape(3), "gravity_cam")
     n = len(p)
     reason = np.full(n, REASONS.index("not_on_box"), dtype=np.int8)
     instance = np.zeros(n, dtype=np.int64)
@@ -247,7 +248,7 @@ def evaluate_contacts(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m: np.
     hit0 = start_on + s0[on, None] * a_on  # (M, 3) contact point on the face
 
     # Rule 2: the rim's lines against the target box only.
-    e1, e2 = _perpendicular_basis(a_on)
+    e1, e2 = perpendicular_basis(a_on)
     angles = 2.0 * np.pi * np.arange(cfg.ring_points) / cfg.ring_points
     ring = cfg.cup_radius * (np.cos(angles)[None, :, None] * e1[:, None, :]
                              + np.sin(angles)[None, :, None] * e2[:, None, :])  # (M, K, 3)
@@ -322,7 +323,7 @@ def robust_quality(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m: np.nda
         >= ``cfg.quality_threshold``.
     """
     p = np.asarray(points_cam, dtype=np.float64).reshape(-1, 3)
-    a = _unit_rows(np.asarray(axes_cam, dtype=np.float64).reshape(-1, 3), "axes_cam")
+    a = unit_rows(np.asarray(axes_cam, dtype=np.float64).reshape(-1, 3), "axes_cam")
     n, k = len(p), cfg.perturbations
     if k < 1:
         raise ValueError(f"perturbations must be >= 1, not {k}")
@@ -331,7 +332,7 @@ def robust_quality(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m: np.nda
     shift = rng.normal(0.0, cfg.sigma_position, size=(n, k, 2))
     tilt = np.abs(rng.normal(0.0, np.radians(cfg.sigma_axis_deg), size=(n, k)))
     phi = rng.uniform(0.0, 2.0 * np.pi, size=(n, k))
-    e1, e2 = _perpendicular_basis(a)
+    e1, e2 = perpendicular_basis(a)
     e1, e2, a3 = e1[:, None, :], e2[:, None, :], a[:, None, :]
     points = p[:, None, :] + shift[..., :1] * e1 + shift[..., 1:] * e2
     towards = np.cos(phi)[..., None] * e1 + np.sin(phi)[..., None] * e2
