@@ -322,13 +322,27 @@ def robust_quality(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m: np.nda
         (N,) float64 in [0, 1]; a candidate is a positive label where it is
         >= ``cfg.quality_threshold``.
     """
+    points, axes = perturbed_grasps(points_cam, axes_cam, cfg, rng)
+    if len(points) == 0:
+        return np.zeros(0)
+    result = evaluate_contacts(points.reshape(-1, 3), axes.reshape(-1, 3), depth_m, mask,
+                               intrinsics, boxes, gravity_cam, cfg)
+    return result.wrench_ok.reshape(points.shape[:2]).mean(axis=1)
+
+
+def perturbed_grasps(points_cam: np.ndarray, axes_cam: np.ndarray, cfg: SuctionModelConfig,
+                     rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """``cfg.perturbations`` = P perturbed copies of each of N grasps (``robust_quality``'s
+    model): points (N, P, 3) and unit axes (N, P, 3), camera frame. Drawn from ``rng`` in this
+    order: in-plane shifts (N, P, 2) of N(0, sigma_position), tilts (N, P) of
+    |N(0, sigma_axis_deg)|, tilt directions (N, P) uniform in [0, 2 pi)."""
     p = np.asarray(points_cam, dtype=np.float64).reshape(-1, 3)
     a = unit_rows(np.asarray(axes_cam, dtype=np.float64).reshape(-1, 3), "axes_cam")
     n, k = len(p), cfg.perturbations
     if k < 1:
         raise ValueError(f"perturbations must be >= 1, not {k}")
     if n == 0:
-        return np.zeros(0)
+        return np.zeros((0, k, 3)), np.zeros((0, k, 3))
     shift = rng.normal(0.0, cfg.sigma_position, size=(n, k, 2))
     tilt = np.abs(rng.normal(0.0, np.radians(cfg.sigma_axis_deg), size=(n, k)))
     phi = rng.uniform(0.0, 2.0 * np.pi, size=(n, k))
@@ -337,6 +351,4 @@ def robust_quality(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m: np.nda
     points = p[:, None, :] + shift[..., :1] * e1 + shift[..., 1:] * e2
     towards = np.cos(phi)[..., None] * e1 + np.sin(phi)[..., None] * e2
     axes = np.cos(tilt)[..., None] * a3 + np.sin(tilt)[..., None] * towards
-    result = evaluate_contacts(points.reshape(-1, 3), axes.reshape(-1, 3), depth_m, mask,
-                               intrinsics, boxes, gravity_cam, cfg)
-    return result.wrench_ok.reshape(n, k).mean(axis=1)
+    return points, axes

@@ -74,7 +74,8 @@ import trimesh
 
 from pipeline.camera.geometry import Intrinsics, pose_matrix
 from pipeline.dexnet.contact import (  # noqa: F401  (REASONS etc. re-exported for callers)
-    REASONS, START_OFFSET, ContactResult, SuctionModelConfig, perpendicular_basis, unit_rows,
+    REASONS, START_OFFSET, ContactResult, SuctionModelConfig, perpendicular_basis,
+    perturbed_grasps, unit_rows,
 )
 
 # Largest angle between a rim hit's surface normal and the centre hit's that still seals.
@@ -416,10 +417,8 @@ def robust_quality_mesh(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m: n
     """Robust quality of N suction grasps on pybullet bodies: the share of perturbed grasps that
     seal and resist (Dex-Net 3.0).
 
-    The perturbations are ``contact.robust_quality``'s, drawn from ``rng`` in the same order
-    (in-plane shifts (N, P, 2) of N(0, sigma_position); tilts (N, P) of |N(0, sigma_axis_deg)|;
-    tilt directions (N, P) uniform in [0, 2 pi)), so for the same generator state both functions
-    perturb the same grasps the same way. All perturbed grasps are labelled by one call of
+    The perturbations are ``contact.perturbed_grasps``, as in ``contact.robust_quality``, so for
+    the same generator state both functions perturb the same grasps the same way. All perturbed grasps are labelled by one call of
     ``evaluate_contacts_mesh``; a candidate's perturbations keep its target.
 
     Args:
@@ -429,21 +428,10 @@ def robust_quality_mesh(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m: n
     Returns:
         (N,) float64 in [0, 1]; a positive label where >= ``cfg.quality_threshold``.
     """
-    pts = np.asarray(points_cam, dtype=np.float64).reshape(-1, 3)
-    a = unit_rows(np.asarray(axes_cam, dtype=np.float64).reshape(-1, 3), "axes_cam")
-    n, k = len(pts), cfg.perturbations
-    if k < 1:
-        raise ValueError(f"perturbations must be >= 1, not {k}")
+    points, axes = perturbed_grasps(points_cam, axes_cam, cfg, rng)
+    n, k = points.shape[:2]
     if n == 0:
         return np.zeros(0)
-    shift = rng.normal(0.0, cfg.sigma_position, size=(n, k, 2))
-    tilt = np.abs(rng.normal(0.0, np.radians(cfg.sigma_axis_deg), size=(n, k)))
-    phi = rng.uniform(0.0, 2.0 * np.pi, size=(n, k))
-    e1, e2 = perpendicular_basis(a)
-    e1, e2, a3 = e1[:, None, :], e2[:, None, :], a[:, None, :]
-    points = pts[:, None, :] + shift[..., :1] * e1 + shift[..., 1:] * e2
-    towards = np.cos(phi)[..., None] * e1 + np.sin(phi)[..., None] * e2
-    axes = np.cos(tilt)[..., None] * a3 + np.sin(tilt)[..., None] * towards
     if targets is not None:
         targets = np.repeat(np.asarray(targets, np.int64).reshape(-1), k)
     result = evaluate_contacts_mesh(points.reshape(-1, 3), axes.reshape(-1, 3), depth_m, mask,
