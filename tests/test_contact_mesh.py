@@ -43,13 +43,6 @@ def _reasons(result) -> list[str]:
     return [REASONS[c] for c in result.reason]
 
 
-@pytest.fixture
-def client():
-    cid = p.connect(p.DIRECT)
-    yield cid
-    p.disconnect(physicsClientId=cid)
-
-
 def _floor(client: int) -> int:
     col = p.createCollisionShape(p.GEOM_BOX, halfExtents=[1.0, 1.0, 0.01], physicsClientId=client)
     return p.createMultiBody(0.0, col, -1, basePosition=[0, 0, -0.01], physicsClientId=client)

@@ -90,13 +90,6 @@ def test_same_seed_same_object():
         sample_object(np.random.default_rng(0), replace(spec, families=("box",)))
 
 
-@pytest.fixture
-def client():
-    cid = p.connect(p.DIRECT)
-    yield cid
-    p.disconnect(physicsClientId=cid)
-
-
 def test_body_falls_onto_a_plane_and_rests(client):
     p.setGravity(0, 0, -9.81, physicsClientId=client)
     p.setPhysicsEngineParameter(fixedTimeStep=1 / 240, physicsClientId=client)
