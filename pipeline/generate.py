@@ -110,7 +110,8 @@ def generate_shard(task: ShardTask) -> ShardSummary:
         "settle_steps", "settled", "box_type", "box_size", "box_T_world", "box_T_cam")}
     for index in range(task.first, task.first + task.count):
         seed = (cfg.seed, SPLIT_CODES[task.split], index)
-        scene = simulate_scene(_CLIENT, cfg, scene_rng(*seed))
+        jitter = cfg.generate.size_jitter if task.split in cfg.generate.size_jitter_splits else 0.0
+        scene = simulate_scene(_CLIENT, cfg, scene_rng(*seed), size_jitter=jitter)
         if float(scene.depth_m.max(initial=0.0)) > max_depth:
             raise ValueError(f"depth beyond {max_depth:.2f} m cannot be stored with "
                              f"generate.depth_unit={unit}; increase the unit")
@@ -230,6 +231,16 @@ def _metrics(summaries: list[ShardSummary], sizes: dict[str, int], max_count: in
     return out
 
 
+def check_size_jitter(gcfg) -> None:
+    """``generate.size_jitter`` in [0, 1) and ``generate.size_jitter_splits`` names splits."""
+    if not 0 <= float(gcfg.size_jitter) < 1:
+        raise ValueError(f"generate.size_jitter must be in [0, 1) (a fraction of each edge), got "
+                         f"{gcfg.size_jitter}; 0 keeps the box types' exact sizes")
+    unknown = sorted(set(gcfg.size_jitter_splits) - set(SPLITS))
+    if unknown:
+        raise ValueError(f"generate.size_jitter_splits has {unknown}: choose from {list(SPLITS)}")
+
+
 def generate(cfg: DictConfig) -> Path:
     """Run the generation stage; returns the artifact folder (reused if it already exists)."""
     config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
@@ -238,6 +249,7 @@ def generate(cfg: DictConfig) -> Path:
     sizes = split_sizes(cfg_obj.generate)
     if not cfg_obj.boxes.types:
         raise ValueError("boxes.types is empty: the box set needs at least one box type")
+    check_size_jitter(cfg_obj.generate)
     check_renderer(cfg_obj.camera.renderer)
     workers = resolve_workers(cfg_obj.generate.workers, cfg_obj.executor)
 

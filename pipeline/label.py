@@ -57,7 +57,7 @@ from pipeline.labelling.types import CLASS_COLORS, NG_REASONS, GraspClass
 from pipeline.tracking import StageLog, default_blueprint
 
 STAGE = "label"
-SECTIONS = ("hand", "surfaces", "label", "robot", "motion")
+SECTIONS = ("hand", "surfaces", "label", "robot", "motion", "servo")
 NOT_AFFECTING_RESULT = ("label.workers", "label.force", "label.generate_version")
 
 @dataclass(frozen=True)

@@ -182,6 +182,19 @@ def test_artifact_and_loader(smoke_cfg, tmp_path):
             assert (np.abs(local) <= box.size / 2 + 0.002).all()
     assert total == manifest["metrics"]["splits"]["train"]["boxes"]
 
+    # Train and validation boxes are jittered (generate.size_jitter_splits); test boxes are not.
+    j = cfg.generate.size_jitter
+    assert j > 0 and list(cfg.generate.size_jitter_splits) == ["train", "val"]
+    types = [np.asarray(t.size) for t in cfg.boxes.types]
+    for split in ("train", "val", "test"):
+        for scene in SceneDataset(folder, split):
+            for box in scene.boxes:
+                ratio = box.size / types[box.type_index]
+                if split == "test":
+                    assert np.array_equal(box.size, types[box.type_index])
+                else:
+                    assert ((1 - j <= ratio) & (ratio <= 1 + j)).all() and (ratio != 1).all()
+
     # Logs: read back entities and message counts.
     entities = rrd_entity_paths(folder / "log.rrd")
     assert {"/world/camera", "/world/camera/depth", "/world/camera/mask", "/world/boxes",
@@ -245,3 +258,54 @@ def test_splits_never_share_seeds(smoke_cfg):
              for i in range(len(SceneDataset(folder, s)))]
     assert len(set(seeds)) == len(seeds)
     assert json.loads((folder / "camera.json").read_text())["depth_unit"] == 1e-4
+
+
+def test_jittered_size_draws_per_edge_and_nothing_at_zero():
+    from pipeline.simulation.heap import jittered_size
+
+    size = np.array([0.1, 0.2, 0.4])
+    rng = np.random.default_rng(3)
+    expect = size * np.random.default_rng(3).uniform(0.8, 1.2, 3)
+    assert np.allclose(jittered_size(size, 0.2, rng), expect)
+    rng = np.random.default_rng(3)
+    assert np.array_equal(jittered_size(size, 0.0, rng), size)
+    assert rng.uniform() == np.random.default_rng(3).uniform()  # no draw was taken
+    with pytest.raises(ValueError, match="size_jitter"):
+        jittered_size(size, 1.0, rng)
+
+
+def test_jittered_heap_bodies_have_their_drawn_size_and_mass(client, sim_cfg):
+    from pipeline.simulation.heap import build_cell, drop_heap
+
+    build_cell(client, sim_cfg.bin, sim_cfg.physics)
+    heap = drop_heap(client, np.random.default_rng(11), sim_cfg.boxes, sim_cfg.bin,
+                     sim_cfg.physics, size_jitter=0.2)
+    assert heap.boxes
+    for box in heap.boxes:
+        base = np.asarray(sim_cfg.boxes.types[box.type_index].size)
+        assert ((box.size >= 0.8 * base) & (box.size <= 1.2 * base)).all()
+        shape = p.getCollisionShapeData(box.body_id, -1, physicsClientId=client)[0]
+        assert np.allclose(shape[3], box.size, atol=1e-6)  # GEOM_BOX dimensions: full extents
+        mass = p.getDynamicsInfo(box.body_id, -1, physicsClientId=client)[0]
+        assert mass == pytest.approx(sim_cfg.boxes.density * np.prod(box.size))
+
+
+def test_unseen_sizes_stay_outside_every_jittered_training_type():
+    """At ``generate.size_jitter`` no box of the unseen-size test set or of the closed-loop trials
+    that is not a training type can be drawn from a training type in any orientation: for every
+    permutation of its edges some edge lies outside [1 - j, 1 + j] × the type's edge."""
+    import itertools
+
+    cfg = OmegaConf.to_object(compose("generate", ["experiment=default"]))
+    j = cfg.generate.size_jitter
+    train = [np.asarray(t.size) for t in cfg.boxes.types]
+    others = [np.asarray(t.size) for t in OmegaConf.to_object(
+        compose("generate", ["experiment=default", "boxes=unseen"])).boxes.types]
+    others += [np.asarray(t.size) for t in cfg.eval_boxes.types
+               if not any(np.array_equal(t.size, s) for s in train)]
+    assert len(others) == 11
+    for size in others:
+        for base in train:
+            for perm in itertools.permutations(size):
+                ratio = np.asarray(perm) / base
+                assert not ((1 - j <= ratio) & (ratio <= 1 + j)).all(), (size, base)

@@ -146,6 +146,8 @@ class GenerateConfig:
     num_test_scenes: int = MISSING
     scenes_per_shard: int = MISSING
     depth_unit: float = MISSING  # stored depth = round(depth_m / depth_unit) as uint16 (0 = no data)
+    size_jitter: float = MISSING  # each box edge scaled by U(1 - j, 1 + j) in size_jitter_splits
+    size_jitter_splits: List[str] = MISSING  # splits whose boxes are jittered (others: exact sizes)
     workers: int = MISSING  # 0 = all cores; does not change the artifact
     force: bool = MISSING  # recompute even if this version exists
 

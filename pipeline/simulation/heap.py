@@ -170,38 +170,57 @@ def _inside_bin(position: np.ndarray, bin_cfg) -> bool:
             and -0.005 < position[2] < bin_cfg.wall_height + 0.1)
 
 
-def drop_heap(client: int, rng: np.random.Generator, boxes_cfg, bin_cfg, physics_cfg) -> HeapResult:
+def _box_shapes(client: int, size: np.ndarray) -> tuple[int, int]:
+    """(collision shape, visual shape) of a box with edge lengths ``size`` (3,), metres."""
+    half = (np.asarray(size, np.float64) / 2).tolist()
+    return (p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client),
+            p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=[0.8, 0.6, 0.4, 1],
+                                physicsClientId=client))
+
+
+def jittered_size(size: np.ndarray, size_jitter: float, rng: np.random.Generator) -> np.ndarray:
+    """A box type's edge lengths (3,), each scaled by its own factor drawn uniformly from
+    [1 − size_jitter, 1 + size_jitter]. ``size_jitter`` = 0 returns ``size`` and draws nothing,
+    so heaps without jitter use the same random stream as before jitter existed."""
+    size = np.asarray(size, np.float64)
+    if size_jitter == 0:
+        return size.copy()
+    if not 0 <= size_jitter < 1:
+        raise ValueError(f"size_jitter must be in [0, 1), got {size_jitter}")
+    return size * rng.uniform(1.0 - size_jitter, 1.0 + size_jitter, 3)
+
+
+def drop_heap(client: int, rng: np.random.Generator, boxes_cfg, bin_cfg, physics_cfg,
+              size_jitter: float = 0.0) -> HeapResult:
     """Drop a random number of random boxes one by one ("trickle"), settle, remove escapees.
 
-    Random draws, in this order: the count, then per box its type, x, y and orientation.
+    Random draws, in this order: the count, then per box its type, x, y and orientation, and,
+    when ``size_jitter`` > 0, its three edge scale factors (``jittered_size``).
     """
     n = int(rng.integers(boxes_cfg.min_count, boxes_cfg.max_count + 1))
     sizes = [np.asarray(t.size, dtype=np.float64) for t in boxes_cfg.types]
-    shapes = []
-    for size in sizes:
-        half = (size / 2).tolist()
-        shapes.append((
-            p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client),
-            p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=[0.8, 0.6, 0.4, 1],
-                                physicsClientId=client),
-        ))
+    shapes = [_box_shapes(client, size) for size in sizes]
     margin = physics_cfg.drop_margin
     hx = bin_cfg.inner_length_x / 2 - margin
     hy = bin_cfg.inner_width_y / 2 - margin
     bodies: list[tuple[int, int]] = []  # (body id, type index)
+    body_size: dict[int, np.ndarray] = {}
     steps = 0
     for i in range(n):
         k = int(rng.integers(len(sizes)))
         x, y = rng.uniform(-hx, hx), rng.uniform(-hy, hy)
         q = random_quaternion(rng)
-        mass = boxes_cfg.density * float(np.prod(sizes[k]))
-        body = p.createMultiBody(mass, shapes[k][0], shapes[k][1],
+        size = jittered_size(sizes[k], size_jitter, rng)
+        shape = shapes[k] if size_jitter == 0 else _box_shapes(client, size)
+        mass = boxes_cfg.density * float(np.prod(size))
+        body = p.createMultiBody(mass, shape[0], shape[1],
                                  basePosition=[x, y, physics_cfg.drop_height_above_bin_floor],
                                  baseOrientation=q.tolist(), physicsClientId=client)
         p.changeDynamics(body, -1, lateralFriction=boxes_cfg.lateral_friction,
                          frictionAnchor=int(bool(physics_cfg.friction_anchor)),
                          physicsClientId=client)
         bodies.append((body, k))
+        body_size[body] = size
         if i < n - 1:
             for _ in range(physics_cfg.drop_interval_steps):
                 p.stepSimulation(physicsClientId=client)
@@ -227,7 +246,7 @@ def drop_heap(client: int, rng: np.random.Generator, boxes_cfg, bin_cfg, physics
     out = []
     for body, k in bodies:
         pos, quat = p.getBasePositionAndOrientation(body, physicsClientId=client)
-        out.append(BoxPose(type_index=k, size=sizes[k].copy(), position=np.asarray(pos),
+        out.append(BoxPose(type_index=k, size=body_size[body].copy(), position=np.asarray(pos),
                            quat_xyzw=np.asarray(quat), body_id=body))
     return HeapResult(boxes=out, num_dropped=n, num_removed=removed, settle_steps=steps,
                       settled=settled)
