@@ -204,3 +204,62 @@ def test_lift_is_cut_to_keep_a_steep_face_in_view(runner):
     x, y, z = cfg.target_point
     intr = runner.cell.intrinsics
     assert abs(y / z) <= 0.7 * intr.cy / intr.fy and abs(x / z) <= 0.7 * intr.cx / intr.fx
+
+
+@pytest.fixture
+def two_boxes(smoke_cfg):
+    """Two medium boxes (145 × 92 × 52 mm) lying flat side by side, touching along y = 0: their
+    top faces are coplanar at z = 52 mm, centred at (0, ±0.046, 0.052)."""
+    from pipeline.labelling.robot_check import robot_config
+    from pipeline.picking.cell import PickCell
+    from pipeline.picking.trial import PickRunner
+    from pipeline.robot.model import Robot
+
+    cfg = smoke_cfg("evaluate", "evaluate.boxes_per_trial=2",
+                    "eval_boxes.types=[{name: medium, size: [0.145, 0.092, 0.052]}]")
+    cell = PickCell(cfg, lambda: Robot(robot_config(cfg)))
+    r = PickRunner(cfg, cell, lambda d, i, rng: [], "test")
+    cell.reset(np.random.default_rng(0), 2)
+    for body, y in zip(cell.boxes, (-0.046, 0.046)):
+        p.resetBasePositionAndOrientation(body, [0, y, 0.026], [0, 0, 0, 1],
+                                          physicsClientId=cell.client)
+    yield r
+    cell.close()
+
+
+def test_coplanar_faces_of_two_boxes_are_split_between_the_planners_points(two_boxes):
+    """The descriptor grows both top faces into one 145 × 184 mm region centred on the seam
+    (y = 0); with the other face's point 92 mm away (> face_split_m) in that region, the
+    surface the check tests and the servo tracks is the chosen face: centre (0, −0.046, 0.052)."""
+    runner = two_boxes
+    a, b = list(runner.cell.boxes)
+    frame, ua, va = _pixel_of(runner, [0, -0.046, 0.052])
+    _, ub, vb = _pixel_of(runner, [0, 0.046, 0.052])
+    cand_a = SimpleNamespace(u=ua, v=va, grasp_class=GraspClass.B)
+    cand_b = SimpleNamespace(u=ub, v=vb, grasp_class=GraspClass.B)
+    assert runner._target_of(frame, cand_a)[0] == a and runner._target_of(frame, cand_b)[0] == b
+
+    def world(point_cam):
+        T = frame.T_world_cam
+        return T[:3, :3] @ point_cam + T[:3, 3]
+
+    alone, sites = runner._home_surface(frame, cand_a, [cand_a])
+    assert sites is None  # no other point: the whole region
+    assert abs(world(alone.center_cam)[1]) < 0.003  # its centre is on the seam
+    assert alone.short_length == pytest.approx(0.145, abs=0.004)
+    assert alone.long_length == pytest.approx(0.184, abs=0.004)
+    part, sites = runner._home_surface(frame, cand_a, [cand_a, cand_b])
+    assert sites.shape == (2, 3)
+    np.testing.assert_allclose(sites, [[0, -0.046, 0.052], [0, 0.046, 0.052]], atol=0.002)
+    np.testing.assert_allclose(world(part.center_cam), [0, -0.046, 0.052], atol=0.003)
+    assert part.long_length == pytest.approx(0.145, abs=0.004)
+    assert part.short_length == pytest.approx(0.092, abs=0.004)
+    # the choice carries the sites to the attempt
+    chosen = runner.select(frame, [cand_a, cand_b], [])
+    assert chosen[0] is cand_a and chosen[4].shape == (2, 3)
+    # a point of the same face (3 cm away, < face_split_m) splits nothing; nor does 0 (off)
+    _, uc, vc = _pixel_of(runner, [0.03, -0.046, 0.052])
+    near = SimpleNamespace(u=uc, v=vc, grasp_class=GraspClass.B)
+    assert runner._home_surface(frame, cand_a, [cand_a, near])[1] is None
+    runner.cfg.evaluate.face_split_m = 0.0
+    assert runner._home_surface(frame, cand_a, [cand_a, cand_b])[1] is None

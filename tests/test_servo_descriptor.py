@@ -344,3 +344,42 @@ def test_a_tracked_seed_that_slid_onto_the_next_face_keeps_the_tracked_face():
     # tracking off (the paper): the expected normal is ignored
     f, _ = describe_surface(depth, SR300, seed, DescriptorConfig(), expected_normal_cam=[0, 0, -1])
     assert angle_deg(f.normal_cam, [s45, 0, -c45]) < 0.5
+
+
+def test_split_region_is_the_voronoi_cell_of_the_first_site():
+    # Points on the x axis at 0, 1, 2, 3, 4 cm (in cm: exact in floating point); sites at 1 cm
+    # (first) and 3 cm: the bisector is x = 2 cm, equidistant, and stays with the first site.
+    pts = np.array([[0.0, 0, 0], [1.0, 0, 0], [2.0, 0, 0], [3.0, 0, 0], [4.0, 0, 0]])
+    from pipeline.servo.descriptor import split_region
+
+    keep = split_region(pts, np.array([[1.0, 0, 0], [3.0, 0, 0]]))
+    assert keep.tolist() == [True, True, True, False, False]
+    # a third site at −0.5 cm takes the point at 0 (0.5 cm from it, 1 cm from the first site)
+    keep = split_region(pts, np.array([[1.0, 0, 0], [3.0, 0, 0], [-0.5, 0, 0]]))
+    assert keep.tolist() == [False, True, True, False, False]
+
+
+def test_two_coplanar_faces_side_by_side_split_at_their_seam():
+    """Two level 0.10 × 0.10 m faces at z = 0.50 touching along x = 0 (no seam in the depth):
+    the region grown at A's centre holds both (0.20 × 0.10 m, centre on the seam, x = 0); with
+    sites at both face centres it is A alone: centre (−0.05, 0, 0.5), both lengths 0.10 m, the
+    82 × 82 pixels of BOX_A (see above) give or take the column on the seam (x = 0 is the
+    pixel centre of column u = 207.5, between columns 207 and 208)."""
+    box_b = rect([0.05, 0.0, 0.50], [1, 0, 0], [0, 1, 0], 0.05, 0.05)
+    depth, _ = render([BOX_A, box_b])
+    centre_a = np.array([-0.05, 0.0, 0.50])
+    seed = project(centre_a, SR300)
+    whole, reason = describe_surface(depth, SR300, seed)
+    assert reason == ""
+    assert abs(whole.center_cam[0]) < 0.002 and whole.long_length == pytest.approx(0.2, abs=0.003)
+    sites = np.array([centre_a, [0.05, 0.0, 0.50]])
+    part, reason = describe_surface(depth, SR300, seed, sites_cam=sites)
+    assert reason == ""
+    np.testing.assert_allclose(part.center_cam, centre_a, atol=0.0015)
+    assert part.long_length == pytest.approx(0.10, abs=0.003)
+    assert part.short_length == pytest.approx(0.10, abs=0.003)
+    assert abs(part.num_pixels - A_PIXELS) <= 82
+    assert not part.region[:, 208:].any()  # nothing of B's side of the seam
+    # one site only (or none) is the whole region
+    one, _ = describe_surface(depth, SR300, seed, sites_cam=sites[:1])
+    assert one.num_pixels == whole.num_pixels

@@ -87,6 +87,7 @@ class Attempt:
     phase: str = ""  # where a collision happened: "servo" or "approach"
     pregrasp_standoff: float = 0.0  # m, the pre-grasp's distance along the normal (0: none)
     lost_reason: str = ""  # the descriptor's reason when the target was lost
+    face_split: bool = False  # the servo's region was split at other planner points (face_split_m)
     # m: farthest the executed camera came from the servo path the run-time check predicted
     # (robot.path_check; None without a prediction)
     path_deviation_m: Optional[float] = None
@@ -144,6 +145,13 @@ def paper_x_axis(feats) -> np.ndarray:
     axes = [(feats.long_axis_cam, feats.warped_long), (feats.short_axis_cam, feats.warped_short)]
     axis, warped = axes[int(np.argmax([abs(w[0]) for _, w in axes]))]  # larger |cos|: nearer X
     return np.asarray(axis if warped[0] >= 0 else -axis, np.float64)
+
+
+def _sites_cam(T_world_cam: np.ndarray, sites_world: np.ndarray | None) -> np.ndarray | None:
+    """World points (k, 3) → the camera frame of ``T_world_cam`` (None stays None)."""
+    if sites_world is None:
+        return None
+    return (np.asarray(sites_world) - T_world_cam[:3, 3]) @ T_world_cam[:3, :3]
 
 
 def move_time(dq: np.ndarray, max_speed: float, max_accel: float) -> float:
@@ -263,8 +271,8 @@ class PickRunner:
     def select(self, frame: Frame, cands: list, failed: list[dict],
                rejected: dict[str, int] | None = None):
         """The grasp to execute: ``(candidate, pattern, hand X axis in the world or None for the
-        paper's rule, the check's predicted camera poses or None)`` of the best-ranked
-        candidate, among the
+        paper's rule, the check's predicted camera poses or None, the face-split sites in the
+        world or None (``_home_surface``))`` of the best-ranked candidate, among the
         first ``evaluate.max_candidates_checked``, that is not a repeat of a failed attempt
         (``_repeats_failure``) and, with ``evaluate.check_reachability``, passes the robot-level
         check with that pattern; None when no candidate does (the trial ends with "no grasp").
@@ -284,10 +292,10 @@ class PickRunner:
                     reject("repeat")
                     continue
                 if not gate:
-                    return cand, pattern, None, None
-                check, reason = self._check(frame, cand, pattern, target)
+                    return cand, pattern, None, None, self._home_surface(frame, cand, cands)[1]
+                check, reason, sites = self._check(frame, cand, pattern, target, cands)
                 if check is not None:
-                    return cand, pattern, check.x_world, check.path
+                    return cand, pattern, check.x_world, check.path, sites
                 reject(reason)
         return None
 
@@ -313,11 +321,48 @@ class PickRunner:
                 return True
         return False
 
-    def _reachable(self, frame: Frame, cand, pattern: str, target: int):
+    def _reachable(self, frame: Frame, cand, pattern: str, target: int, cands=()):
         """The passing ``GraspCheck`` of ``_check``, or None when it rejects the candidate."""
-        return self._check(frame, cand, pattern, target)[0]
+        return self._check(frame, cand, pattern, target, cands)[0]
 
-    def _check(self, frame: Frame, cand, pattern: str, target: int):
+    def _home_surface(self, frame: Frame, cand, cands):
+        """(the descriptor's surface at the candidate in the home frame or None, the face-split
+        sites or None).
+
+        The sites (k, 3), world frame (``evaluate.face_split_m``;
+        ``pipeline.servo.descriptor.split_region``): the candidate's point first, then the point
+        of every other candidate of ``cands`` (the planner's at home) that lies in the region
+        the descriptor grows at the candidate and farther than ``face_split_m`` from its point:
+        a region holding points of two faces holds two faces, and the surface returned is the
+        candidate's part of it. None when there is no such point, the split is off, or the
+        candidate is a single suction point (Dex-Net)."""
+        from pipeline.servo.descriptor import describe_surface
+
+        seed = np.array([cand.u, cand.v], np.float64)
+        feats, _ = describe_surface(frame.depth_m, self.cell.intrinsics, seed,
+                                    self.descriptor_cfg)
+        split_m = float(self.cfg.evaluate.face_split_m)
+        point = self._point_cam(frame, cand)
+        if split_m <= 0 or self._fixed_point(cand) is not None or feats is None or point is None:
+            return feats, None
+        sites = [point]
+        for other in cands:
+            u, v = int(round(other.u)), int(round(other.v))
+            if other is cand or not (0 <= v < feats.region.shape[0]
+                                     and 0 <= u < feats.region.shape[1]) \
+                    or not feats.region[v, u]:
+                continue
+            q = self._point_cam(frame, other)
+            if q is not None and np.linalg.norm(q - point) > split_m:
+                sites.append(q)
+        if len(sites) < 2:
+            return feats, None
+        feats, _ = describe_surface(frame.depth_m, self.cell.intrinsics, seed,
+                                    self.descriptor_cfg, sites_cam=np.asarray(sites))
+        T = frame.T_world_cam
+        return feats, np.asarray(sites) @ T[:3, :3].T + T[:3, 3]
+
+    def _check(self, frame: Frame, cand, pattern: str, target: int, cands=()):
         """The robot-level check of the labelling stage for a grasp at the candidate
         (``pipeline.labelling.robot_check.check_grasp``: the grasp pose and, with
         ``robot.path_check``, the servo's predicted motion from home to it): the descriptor must
@@ -325,16 +370,18 @@ class PickRunner:
         axis nearer the image X, turned about the normal by the first of ``hand.rotations_deg``
         that works.
 
-        Returns (the passing ``GraspCheck`` (the hand's X axis in the world, the predicted camera
-        poses), None), or (None, the reason) when the check rejects the candidate: the check's
-        NG reason, or "descriptor" when the descriptor finds no surface at the point."""
-        from pipeline.labelling.robot_check import check_grasp
-        from pipeline.servo.descriptor import describe_surface
+        The surface is the one the servo will track: split at the other candidates of ``cands``
+        (``_home_surface``).
 
-        feats, _ = describe_surface(frame.depth_m, self.cell.intrinsics,
-                                    np.array([cand.u, cand.v], np.float64), self.descriptor_cfg)
+        Returns (the passing ``GraspCheck`` (the hand's X axis in the world, the predicted camera
+        poses), None, the face-split sites or None), or (None, the reason, None) when the check
+        rejects the candidate: the check's NG reason, or "descriptor" when the descriptor finds
+        no surface at the point."""
+        from pipeline.labelling.robot_check import check_grasp
+
+        feats, sites = self._home_surface(frame, cand, cands)
         if feats is None:
-            return None, "descriptor"
+            return None, "descriptor", None
         # where the servo will put the active cup: the planner's own point (Dex-Net), else the
         # centre of the surface the descriptor finds at the candidate (what the servo tracks)
         fixed = self._fixed_point(cand)
@@ -344,7 +391,7 @@ class PickRunner:
                             paper_x_axis(feats), pattern, self.cell.intrinsics,
                             self.cell.obstacles, [target] if target >= 0 else [],
                             self.cell.cell_ids[1:])
-        return (check, None) if check.reason is None else (None, str(check.reason))
+        return (check, None, sites) if check.reason is None else (None, str(check.reason), None)
 
     def _first_goal(self, centre_cam: np.ndarray, feats, ref_cam, pattern: str,
                     T_world_cam: np.ndarray):
@@ -432,11 +479,13 @@ class PickRunner:
 
     def attempt(self, frame: Frame, cand, planning_s: float, trial: int, index: int,
                 trace: list | None, pattern: str | None = None,
-                x_world: np.ndarray | None = None, predicted: list | None = None) -> Attempt:
+                x_world: np.ndarray | None = None, predicted: list | None = None,
+                sites_world: np.ndarray | None = None) -> Attempt:
         """One attempt at ``cand`` with ``pattern`` (default: its first in ``_patterns``);
         ``x_world``: where the hand's X should point (world frame; None: the paper's rule);
         ``predicted``: the run-time check's camera poses of this servo, from which the
-        attempt's ``path_deviation_m`` is measured (None: not recorded)."""
+        attempt's ``path_deviation_m`` is measured (None: not recorded); ``sites_world``:
+        (k, 3) the face-split sites (``_home_surface``), or None for the whole region."""
         from pipeline.servo.control import servo_velocity
         from pipeline.servo.descriptor import describe_surface
 
@@ -447,7 +496,7 @@ class PickRunner:
         att = Attempt(trial=trial, index=index, planner=self.name, pattern=pattern,
                       g_opt=[float(cand.u), float(cand.v)], target_body=target,
                       target_type=cell.boxes[target]["type"] if target >= 0 else "",
-                      planning_s=planning_s)
+                      planning_s=planning_s, face_split=sites_world is not None)
         # Dex-Net: the servo target is its own point, fixed in the world.
         fixed_point_world = None
         fixed = self._fixed_point(cand)
@@ -471,7 +520,8 @@ class PickRunner:
             # the tracked surface's normal, carried into this frame by the camera's motion
             expected = None if normal_world is None else frame.T_world_cam[:3, :3].T @ normal_world
             feats, reason = describe_surface(frame.depth_m, intr, seed, self.descriptor_cfg,
-                                             expected_normal_cam=expected)
+                                             expected_normal_cam=expected,
+                                             sites_cam=_sites_cam(frame.T_world_cam, sites_world))
             self.timings["descriptor_s"].append(time.perf_counter() - td)
             if feats is None:
                 att.outcome, att.lost_reason = "lost_target", str(reason)
@@ -648,11 +698,11 @@ class PickRunner:
                             "checked": min(len(cands), int(ev.max_candidates_checked)),
                             "rejected": dict(sorted(rejected.items()))}
                 break
-            cand, pattern, x_world, predicted = chosen
+            cand, pattern, x_world, predicted, sites = chosen
             target, point = self._target_of(frame, cand)
             pose = self.cell.box_pose(target) if target >= 0 else (np.zeros(3), np.zeros(4))
             att = self.attempt(frame, cand, planning_s, trial, index, trace, pattern, x_world,
-                               predicted)
+                               predicted, sites)
             attempts.append(att)
             if att.outcome != "success":
                 if point is not None:

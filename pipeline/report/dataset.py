@@ -176,6 +176,16 @@ def render_dataset(info: DatasetInfo, tables: dict[str, Table]) -> list[str]:
     dt = time_step(info.config)
     cap = phys.get("max_settle_steps")
     W, H = info.stats.image_size
+    gen = info.config.get("generate", {})
+    jitter = float(gen.get("size_jitter", 0.0))
+    jitter_note = (
+        f"Edge lengths are the types' nominal sizes. Not the paper's: in the "
+        f"{' and '.join(gen.get('size_jitter_splits', []))} heaps each box's three edges are "
+        f"scaled by factors drawn from U({1 - jitter:g}, {1 + jitter:g}) "
+        f"(`generate.size_jitter`, docs/generation.md); the other "
+        f"splits hold the exact sizes." if jitter > 0 else
+        "Every box has its type's exact size (`generate.size_jitter` = 0, the paper's three "
+        "sizes).")
     return [
         "## Dataset",
         "",
@@ -192,7 +202,7 @@ def render_dataset(info: DatasetInfo, tables: dict[str, Table]) -> list[str]:
         "### Box types",
         "",
         f"All splits, counted from the scenes. The visible area is the number of pixels of the "
-        f"box in the {W}x{H} instance mask (0 for a fully hidden box).",
+        f"box in the {W}x{H} instance mask (0 for a fully hidden box). {jitter_note}",
         "",
         tables["box_types"].markdown(),
         "CSV versions: [tables/dataset_splits.csv](tables/dataset_splits.csv), "

@@ -68,7 +68,10 @@ Algorithm and the choices made where the paper is vague:
    same height the region takes the other face's pixels next to the crease that lie within ε1
    of the plane (on ideal depth with k = 0: at most two pixel columns for a 20° crease; Eq. 13
    itself lets through the column whose stencil straddles the crease). ``rim=0``: the paper's
-   rules only, no growth. A region with fewer than ``min_pixels`` pixels (after the rim) is no
+   rules only, no growth. With ``sites_cam`` (addition, the closed loop's face split), the
+   region then keeps only the Voronoi cell of the first site (``split_region``): coplanar faces
+   of two boxes side by side at the same height have no seam in ideal depth and grow into one
+   region. A region with fewer than ``min_pixels`` pixels (after the rim and the split) is no
    surface (``"region_too_small"``).
 6. **Surface geometry.** If ``refine`` (default), the plane is refitted by least squares on all
    the region's points, and ``normal_cam`` is that plane's normal; otherwise n̂. The centre,
@@ -347,9 +350,18 @@ def _tracked_plane(win: np.ndarray, seed_point: np.ndarray, cfg: DescriptorConfi
     return n, float(d[used].mean())
 
 
+def split_region(points: np.ndarray, sites: np.ndarray) -> np.ndarray:
+    """(n,) bool: which of the region's ``points`` (n, 3) are nearer to ``sites[0]`` than to
+    every other site of ``sites`` (k, 3) (its Voronoi cell; ties stay). Same frame and unit for
+    both. Two equal faces side by side with a site at each centre split at their seam."""
+    d2 = ((points[:, None, :] - sites[None, :, :]) ** 2).sum(-1)  # (n, k)
+    return d2[:, 0] <= d2[:, 1:].min(axis=1)
+
+
 def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
                      cfg: DescriptorConfig | None = None,
-                     expected_normal_cam: np.ndarray | None = None
+                     expected_normal_cam: np.ndarray | None = None,
+                     sites_cam: np.ndarray | None = None
                      ) -> tuple[SurfaceFeatures | None, str]:
     """Surface features of the planar surface at ``seed_uv`` (paper Sec. 5.1; see the module
     docstring for the algorithm).
@@ -363,6 +375,11 @@ def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
         expected_normal_cam: (3,) optional, the normal the surface should have in this camera
             frame (the tracked surface's, moved by the camera's motion); used with
             ``cfg.track_normal_deg``.
+        sites_cam: (k, 3) optional points, camera frame, metres, the first the tracked face's
+            (not the paper's; ``split_region``): with k ≥ 2 the grown region keeps only the
+            pixels nearer to the first site than to every other, before the plane and the
+            rectangle are fitted. The closed loop passes the planner's points of other faces
+            that lie in the region, where coplanar faces of two boxes grew into one region.
 
     Returns:
         (features, "") when a surface is found, else (None, reason) with reason one of
@@ -497,6 +514,13 @@ def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
     for _ in range(grow):
         grown = cv2.dilate(grown, kernel) & on_plane_c.view(np.uint8)
     idx = np.flatnonzero(grown)  # row-major, as region_surface needs
+    pts = np.stack([Xc.ravel()[idx], Yc.ravel()[idx], Zc.ravel()[idx]],
+                   axis=1).astype(np.float64)
+    if sites_cam is not None and len(sites_cam) > 1:
+        keep = split_region(pts, np.asarray(sites_cam, np.float64))
+        idx, pts = idx[keep], pts[keep]
+        grown = np.zeros_like(grown)
+        grown.ravel()[idx] = 1
     if len(idx) < cfg.min_pixels:
         return None, "region_too_small"
     rv, ru = np.divmod(idx, c1 - c0)
@@ -506,8 +530,6 @@ def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
     region[crop] = grown.view(bool)
 
     # (6) Plane of the region and its rectangle.
-    pts = np.stack([Xc.ravel()[idx], Yc.ravel()[idx], Zc.ravel()[idx]],
-                   axis=1).astype(np.float64)
     if cfg.refine:
         n, c, e1, e2 = fit_plane(pts)
     else:
