@@ -263,3 +263,33 @@ def test_coplanar_faces_of_two_boxes_are_split_between_the_planners_points(two_b
     assert runner._home_surface(frame, cand_a, [cand_a, near])[1] is None
     runner.cfg.evaluate.face_split_m = 0.0
     assert runner._home_surface(frame, cand_a, [cand_a, cand_b])[1] is None
+
+
+def test_pattern_fits_by_the_hand_level_rule(smoke_cfg):
+    """A 145 × 52 mm face (a medium box on its side). Cups: 18 mm discs (radius 9 mm, no
+    margin at run time), B's at ±35 mm along the hand's Y. X along the long axis: half-lengths
+    72.5 mm (X) and 26 mm (Y), B's cups reach 35 + 9 = 44 mm > 26 mm: no B; one cup on the
+    centre (9 mm) fits: L, R. X along the short axis: Y half-length 72.5 mm ≥ 44 mm and
+    9 mm ≤ 26 mm: B fits. A 90 × 90 mm face: 44 mm ≤ 45 mm, B fits (the labels' 2 mm margin
+    would say no). Area: B needs 1.2 × 2 × π 9² mm² = 610.7 mm², one cup 305.4 mm²."""
+    from pipeline.picking.trial import pattern_fits
+
+    hand = smoke_cfg("evaluate").hand
+    face = dict(long_length=0.145, short_length=0.052, area=0.145 * 0.052)
+    x_long = SimpleNamespace(**face, warped_long=np.array([1.0, 0, 0]),
+                             warped_short=np.array([0, 1.0, 0]))
+    x_short = SimpleNamespace(**face, warped_long=np.array([0, 1.0, 0]),
+                              warped_short=np.array([1.0, 0, 0]))
+    assert not pattern_fits(x_long, "B", hand)
+    assert pattern_fits(x_long, "L", hand) and pattern_fits(x_long, "R", hand)
+    assert pattern_fits(x_short, "B", hand)
+    square = SimpleNamespace(long_length=0.09, short_length=0.09, area=0.0081,
+                             warped_long=np.array([1.0, 0, 0]), warped_short=np.array([0, 1.0, 0]))
+    assert pattern_fits(square, "B", hand)
+    assert not pattern_fits(SimpleNamespace(**{**vars(square), "short_length": 0.087}), "B", hand)
+    # a 25 mm square: one cup fits (9 mm ≤ 12.5 mm) if the area is at least 305.4 mm²
+    small = dict(long_length=0.025, short_length=0.025, warped_long=np.array([1.0, 0, 0]),
+                 warped_short=np.array([0, 1.0, 0]))
+    assert pattern_fits(SimpleNamespace(**small, area=0.000625), "L", hand)
+    assert not pattern_fits(SimpleNamespace(**small, area=0.0003), "L", hand)
+    assert not pattern_fits(SimpleNamespace(**small, area=0.000625), "B", hand)

@@ -387,6 +387,7 @@ class EvaluateConfig:
     retry_moved_m: float = MISSING
     retry_moved_deg: float = MISSING
     face_split_m: float = MISSING  # split the home region at other planner points this far away
+    check_hand_fit: bool = MISSING  # the run-time check tests the pattern's cups on the surface
     ranking_policy: str = MISSING  # "paper" (Eq. 7) | "height_tiebreak" (Sec. 8.4's proposed fix)
     inclination_tie_deg: float = MISSING  # height_tiebreak: inclinations closer than this tie
     min_area_ratio: float = MISSING  # 0: off (paper); 1.2: Sec. 8.4's surface-area safety check

@@ -147,6 +147,29 @@ def paper_x_axis(feats) -> np.ndarray:
     return np.asarray(axis if warped[0] >= 0 else -axis, np.float64)
 
 
+def pattern_fits(feats, pattern: str, hand_cfg) -> bool:
+    """Whether ``pattern``'s active cups lie on the descriptor's surface ``feats``: the
+    labelling stage's hand-level rule (``pipeline.labelling.hand.cup_fits``: each cup disc
+    inside the surface rectangle, the area at least ``min_area_ratio`` × the active cups' area)
+    without the labels' safety margin (a disc just inside the rectangle seals), with the hand's
+    X by the paper's rule (``paper_x_axis``) and the cups on its Y, at ±``cup_offset`` for B and
+    the one active cup on the centre for L and R. Turning the hand by 90°
+    (``hand.rotations_deg``) leaves a single cup's fit unchanged, and B takes only 0 and 180°,
+    so the paper's axis decides."""
+    from types import SimpleNamespace
+
+    from pipeline.labelling.hand import cup_fits
+
+    x_is_long = abs(feats.warped_long[0]) >= abs(feats.warped_short[0])  # as paper_x_axis
+    half_x, half_y = (feats.long_length / 2, feats.short_length / 2) if x_is_long else \
+        (feats.short_length / 2, feats.long_length / 2)
+    cups = 2 if pattern == "B" else 1
+    cup_area = math.pi * (float(hand_cfg.cup_diameter) / 2) ** 2
+    discs = SimpleNamespace(cup_diameter=float(hand_cfg.cup_diameter), margin=0.0)
+    return cup_fits(half_x, half_y, float(hand_cfg.cup_offset) if cups == 2 else 0.0, discs) \
+        and feats.area >= float(hand_cfg.min_area_ratio) * cups * cup_area
+
+
 def _sites_cam(T_world_cam: np.ndarray, sites_world: np.ndarray | None) -> np.ndarray | None:
     """World points (k, 3) → the camera frame of ``T_world_cam`` (None stays None)."""
     if sites_world is None:
@@ -375,13 +398,18 @@ class PickRunner:
 
         Returns (the passing ``GraspCheck`` (the hand's X axis in the world, the predicted camera
         poses), None, the face-split sites or None), or (None, the reason, None) when the check
-        rejects the candidate: the check's NG reason, or "descriptor" when the descriptor finds
-        no surface at the point."""
+        rejects the candidate: the check's NG reason, "descriptor" when the descriptor finds
+        no surface at the point, or, with ``evaluate.check_hand_fit``, "hand_fit" when the
+        pattern's cups do not fit on that surface (``pattern_fits``; DCNN and oracle
+        candidates)."""
         from pipeline.labelling.robot_check import check_grasp
 
         feats, sites = self._home_surface(frame, cand, cands)
         if feats is None:
             return None, "descriptor", None
+        if bool(self.cfg.evaluate.check_hand_fit) and getattr(cand, "grasp_class", None) \
+                is not None and not pattern_fits(feats, pattern, self.cfg.hand):
+            return None, "hand_fit", None
         # where the servo will put the active cup: the planner's own point (Dex-Net), else the
         # centre of the surface the descriptor finds at the candidate (what the servo tracks)
         fixed = self._fixed_point(cand)
