@@ -4,11 +4,12 @@ settings are built from their sections without field-by-field copies."""
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import pytest
 from omegaconf import MISSING, OmegaConf
 
-from pipeline.cli import compose
+from pipeline.cli import CONF_DIR, compose
 from pipeline.config import schema
 from pipeline.config.build import from_section
 
@@ -53,3 +54,13 @@ def test_every_stage_config_is_complete(root):
         [["experiment=smoke", extra] for extra in ("sensor=sr300", "executor=ray", "planner=dcnn")]
     for overrides in runs:
         assert OmegaConf.missing_keys(compose(root, overrides)) == set(), (root, overrides)
+
+
+def test_executor_options_are_the_executors_only():
+    """The Ray settings are included by both executors, not an executor of their own."""
+    from hydra.errors import MissingConfigException
+
+    options = sorted(p.stem for p in (Path(CONF_DIR) / "executor").glob("*.yaml"))
+    assert options == ["local", "ray"]
+    with pytest.raises(MissingConfigException, match="local"):
+        compose("generate", ["experiment=smoke", "executor=ray_settings"])
