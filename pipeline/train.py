@@ -429,7 +429,8 @@ def train(cfg: DictConfig) -> Path | None:
                                  "over, e.g. train.threshold_grid=[0.1,0.2,0.3]")
             planner = Planner(net, norm, ranking_config(cfg, grid[0]), run_device)
             t1 = time.perf_counter()
-            th_curve = threshold_curve(ranked_images(planner, sets["val"], progress), grid,
+            th_curve = threshold_curve(ranked_images(planner, sets["val"], progress,
+                                                      desc="train: calibrating th on val"), grid,
                                        float(tc.match_radius_px))
             threshold = (choose_threshold(th_curve) if tc.threshold is None
                          else float(tc.threshold))

@@ -1,4 +1,5 @@
-"""The report stage on a tiny generated and labelled dataset (4 train, 1 val, 2 test scenes)."""
+"""The report stage on the session's smoke pipeline (4 train, 1 val, 2 test scenes, a smoke
+network; ``tests/conftest.py``), copied into a root of its own."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from matplotlib import image as mpimg
 
 from pipeline.artifacts import ArtifactError, load_manifest, verify_artifact
 from pipeline.cli import compose, stage_main
+from conftest import smoke_overrides
 from pipeline.dataset.scenes import SPLITS, SceneDataset
 from pipeline.generate import generate
 from pipeline.dataset.labels import LabelSet
@@ -29,30 +31,28 @@ from pipeline.report.robustness import ROBUSTNESS_NOT_RUN
 from pipeline.report.training import TABLE1_SECTION, TRAIN_NOT_RUN
 from pipeline.train import train
 
-TINY = ("generate.num_scenes=4", "generate.num_val_scenes=1", "generate.num_test_scenes=2",
-        "generate.workers=1")
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 LABEL_TABLES = ("label_classes.csv", "label_ng_reasons.csv", "surface_accuracy.csv")
 
 
 def _cfg(root: Path, name: str, *overrides: str):
-    # Same overrides as conftest's smoke_cfg, for module-scoped fixtures (tmp_path is per test).
-    return compose(name, ["experiment=smoke", f"paths.root={root}", "logging.progress=false",
-                          *overrides])
+    """The smoke config of stage ``name`` rooted in ``root``, with the session pipeline's scene
+    counts (conftest's ``smoke_overrides``)."""
+    return compose(name, smoke_overrides(root, *overrides))
 
 
 def _generate_and_label(root: Path) -> None:
-    generate(_cfg(root, "generate", *TINY))
-    label(_cfg(root, "label", *TINY, "label.workers=1"))
-    # A smoke training (1 epoch, width 0.0625) on CPU, where it is deterministic.
-    train(_cfg(root, "train", *TINY, "train.device=cpu"))
+    """The session pipeline's generation, labels and smoke training (1 epoch, width 0.0625, on
+    CPU, where it is deterministic), built again in ``root``."""
+    generate(_cfg(root, "generate"))
+    label(_cfg(root, "label"))
+    train(_cfg(root, "train"))
 
 
 @pytest.fixture(scope="module")
-def root_a(tmp_path_factory) -> Path:
-    root = tmp_path_factory.mktemp("root_a")
-    _generate_and_label(root)
-    return root
+def root_a(smoke_pipeline, tmp_path_factory) -> Path:
+    """A copy of the session's smoke pipeline (the report writes into its root)."""
+    return smoke_pipeline.copy(tmp_path_factory.mktemp("root_a")).root
 
 
 @pytest.fixture(scope="module")
@@ -316,7 +316,9 @@ def test_artifact_is_complete_and_logged(report_a: Path) -> None:
         assert counts[f"/report/tables/{Path(name).stem}"] >= 1
 
 
+@pytest.mark.slow
 def test_report_is_reproducible_across_roots(root_a: Path, report_a: Path, tmp_path: Path) -> None:
+    """The whole chain built again in another root gives a byte-identical report."""
     root_b = tmp_path / "root_b"
     _generate_and_label(root_b)
     report_b = report(_cfg(root_b, "report"))

@@ -31,27 +31,25 @@ def table1(planner: Planner, data: GraspDataset, radius_px: float, depth_of=None
         raw = planner.predict(np.stack([depth_of(i) for i in idx]))
         for k, i in enumerate(idx):
             preds = decode_output(raw[k], threshold=-1.0, image_size=planner.size)
-            rows = data.rows[i]
-            images.append(ImagePredictions(
-                uv=np.array([[p.u, p.v] for p in preds], np.float64).reshape(-1, 2),
-                classes=np.array([int(p.grasp_class) for p in preds], np.int64),
-                scores=np.array([p.probability for p in preds], np.float64),
-                gt_uv=rows["uv"], gt_classes=rows["grasp_class"]))
+            images.append(image_predictions(preds, data.rows[i]))
     return precision_table(images, radius_px, threshold=planner.ranking.threshold)
 
 
 @torch.no_grad()
-def ranked_images(planner: Planner, data: GraspDataset, progress: bool = False) -> list[ImagePredictions]:
+def ranked_images(planner: Planner, data: GraspDataset, progress: bool = False,
+                  desc: str = "planning") -> list[ImagePredictions]:
     """Every image of a split planned at the planner's th: its candidates in Eq. 7's order and
-    its label points (``pipeline.planner.calibration``)."""
-    out = []
-    for i in tqdm(range(len(data)), desc="train: calibrating th on val", unit="image",
-                  disable=not progress):
-        cands = planner.plan(data.depth_m(i), data.intrinsics)
-        rows = data.rows[i]
-        out.append(ImagePredictions(
-            uv=np.array([[c.u, c.v] for c in cands], np.float64).reshape(-1, 2),
-            classes=np.array([int(c.grasp_class) for c in cands], np.int64),
-            scores=np.array([c.probability for c in cands], np.float64),
-            gt_uv=rows["uv"], gt_classes=rows["grasp_class"]))
-    return out
+    its label points (``pipeline.planner.calibration``). ``desc``: the progress bar's label."""
+    return [image_predictions(planner.plan(data.depth_m(i), data.intrinsics), data.rows[i])
+            for i in tqdm(range(len(data)), desc=desc, unit="image", disable=not progress)]
+
+
+def image_predictions(points, rows: dict) -> ImagePredictions:
+    """One image's predicted points (objects with ``u``, ``v``, ``grasp_class`` and
+    ``probability``: decoded cells or ranked candidates, in their order) beside its label rows
+    (``uv`` (M, 2) pixels, ``grasp_class`` (M,))."""
+    return ImagePredictions(
+        uv=np.array([[p.u, p.v] for p in points], np.float64).reshape(-1, 2),
+        classes=np.array([int(p.grasp_class) for p in points], np.int64),
+        scores=np.array([p.probability for p in points], np.float64),
+        gt_uv=rows["uv"], gt_classes=rows["grasp_class"])
