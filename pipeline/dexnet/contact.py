@@ -188,6 +188,95 @@ def unit_rows(x: np.ndarray, name: str) -> np.ndarray:
     return x / norm
 
 
+def checked_inputs(points_cam, axes_cam, depth_m: np.ndarray, mask: np.ndarray,
+                   intrinsics: Intrinsics, gravity_cam, cfg: SuctionModelConfig
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The contact models' inputs checked: (points (N, 3), unit axes (N, 3), unit gravity (3,)),
+    camera frame. Raises ``ValueError`` for unequal point and axis counts, a depth image or mask
+    that is not the intrinsics' (H, W), fewer than 3 rim points, or a zero axis or gravity."""
+    p = np.asarray(points_cam, dtype=np.float64).reshape(-1, 3)
+    a = unit_rows(np.asarray(axes_cam, dtype=np.float64).reshape(-1, 3), "axes_cam")
+    if len(a) != len(p):
+        raise ValueError(f"{len(p)} points but {len(a)} axes")
+    shape = (intrinsics.height, intrinsics.width)
+    if depth_m.shape != shape or mask.shape != shape:
+        raise ValueError(f"depth {depth_m.shape} and mask {mask.shape} must both be (H, W) = "
+                         f"{shape}, the camera intrinsics' image size")
+    if cfg.ring_points < 3:
+        raise ValueError(f"ring_points must be >= 3, not {cfg.ring_points}")
+    g_dir = unit_rows(np.asarray(gravity_cam, dtype=np.float64).reshape(3), "gravity_cam")
+    return p, a, g_dir
+
+
+def empty_result(n: int) -> ContactResult:
+    """N candidates on nothing: no seal, no wrench, reason "not_on_box", instance 0."""
+    return ContactResult(np.zeros(n, dtype=bool), np.zeros(n, dtype=bool),
+                         np.full(n, REASONS.index("not_on_box"), dtype=np.int8),
+                         np.zeros(n, dtype=np.int64))
+
+
+def rim_ring(axes: np.ndarray, cfg: SuctionModelConfig) -> np.ndarray:
+    """(M, K, 3) offsets of the cup rim's K = ``ring_points`` points from the centre line, on a
+    circle of ``cup_radius`` perpendicular to each unit axis of ``axes`` (M, 3), evenly spaced
+    from the first ``perpendicular_basis`` vector."""
+    e1, e2 = perpendicular_basis(axes)
+    angles = 2.0 * np.pi * np.arange(cfg.ring_points) / cfg.ring_points
+    return cfg.cup_radius * (np.cos(angles)[None, :, None] * e1[:, None, :]
+                             + np.sin(angles)[None, :, None] * e2[:, None, :])
+
+
+def occluded_contacts(points: np.ndarray, instance: np.ndarray, depth_m: np.ndarray,
+                      mask: np.ndarray, intrinsics: Intrinsics,
+                      cfg: SuctionModelConfig) -> np.ndarray:
+    """Rule 3: (M,) whether any of each candidate's contact points (M, P, 3) (rim hits and the
+    centre's, camera frame) is not what the camera sees there: outside the image or behind it,
+    another instance in ``mask`` than ``instance`` (M,), or a depth more than
+    ``visibility_tolerance`` away."""
+    z = points[..., 2]
+    in_front = z > 1e-9
+    z_safe = np.where(in_front, z, 1.0)
+    u = np.rint(intrinsics.fx * points[..., 0] / z_safe + intrinsics.cx)
+    v = np.rint(intrinsics.fy * points[..., 1] / z_safe + intrinsics.cy)
+    inside = in_front & (u >= 0) & (u < intrinsics.width) & (v >= 0) & (v < intrinsics.height)
+    ui = np.where(inside, u, 0).astype(np.intp)
+    vi = np.where(inside, v, 0).astype(np.intp)
+    seen = (inside & (mask[vi, ui] == instance[:, None])
+            & (np.abs(depth_m[vi, ui] - z) <= cfg.visibility_tolerance))
+    return ~np.all(seen, axis=1)
+
+
+def wrench_failures(mass: np.ndarray, com: np.ndarray, contact: np.ndarray, axes: np.ndarray,
+                    g_dir: np.ndarray, cfg: SuctionModelConfig) -> list[np.ndarray]:
+    """Rule 4: the object's weight against the soft contact's wrench limits, per candidate.
+    ``mass`` (M,) kg, ``com`` and ``contact`` (M, 3) and ``axes`` (M, 3) unit, ``g_dir`` (3,)
+    unit, one frame. Returns the (M,) failures [pull, shear, torsion, bending]."""
+    F = (mass * cfg.gravity)[:, None] * g_dir  # (M, 3)
+    f_pull = np.einsum("mi,mi->m", F, axes)
+    f_n = cfg.vacuum_force - f_pull
+    shear = np.linalg.norm(F - f_pull[:, None] * axes, axis=1)
+    tau = np.cross(com - contact, F)
+    tau_axial = np.einsum("mi,mi->m", tau, axes)
+    bend = np.linalg.norm(tau - tau_axial[:, None] * axes, axis=1)
+    r, mu = cfg.cup_radius, cfg.friction
+    return [f_n < 0.0, shear > mu * f_n, np.abs(tau_axial) > r * mu * f_n, bend > r * f_n]
+
+
+def record_rules(out: ContactResult, on: np.ndarray, instance: np.ndarray, off_face: np.ndarray,
+                 uneven: np.ndarray, occluded: np.ndarray, wrench: list[np.ndarray]
+                 ) -> ContactResult:
+    """Write the candidates ``on``'s rule outcomes into ``out``: the first failed rule is the
+    reason (off_face, uneven, occluded, then pull, shear, torsion, bending), a seal is no
+    rule-2/3 failure, wrench_ok a seal and no rule-4 failure."""
+    conditions = [off_face, uneven, occluded, *wrench]
+    names = ["off_face", "uneven", "occluded", "pull", "shear", "torsion", "bending"]
+    sealed = ~off_face & ~uneven & ~occluded
+    out.reason[on] = np.select(conditions, [REASONS.index(k) for k in names], REASONS.index("ok"))
+    out.instance[on] = instance
+    out.seal[on] = sealed
+    out.wrench_ok[on] = sealed & ~np.any(wrench, axis=0)
+    return out
+
+
 def evaluate_contacts(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m: np.ndarray,
                       mask: np.ndarray, intrinsics: Intrinsics, boxes: Sequence,
                       gravity_cam: np.ndarray, cfg: SuctionModelConfig) -> ContactResult:
@@ -208,24 +297,12 @@ def evaluate_contacts(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m: np.
     Returns:
         A ContactResult of (N,) arrays.
     """
-    p = np.asarray(points_cam, dtype=np.float64).reshape(-1, 3)
-    a = unit_rows(np.asarray(axes_cam, dtype=np.float64).reshape(-1, 3), "axes_cam")
-    if len(a) != len(p):
-        raise ValueError(f"{len(p)} points but {len(a)} axes")
-    shape = (intrinsics.height, intrinsics.width)
-    if depth_m.shape != shape or mask.shape != shape:
-        raise ValueError(f"depth {depth_m.shape} and mask {mask.shape} must both be (H, W) = "
-                         f"{shape}, the camera intrinsics' image size")
-    if cfg.ring_points < 3:
-        raise ValueError(f"ring_points must be >= 3, not {cfg.ring_points}")
-    g_dir = unit_rows(np.asarray(gravity_cam, dtype=np.float64).reshape(3), "gravity_cam")
+    p, a, g_dir = checked_inputs(points_cam, axes_cam, depth_m, mask, intrinsics, gravity_cam,
+                                 cfg)
     n = len(p)
-    reason = np.full(n, REASONS.index("not_on_box"), dtype=np.int8)
-    instance = np.zeros(n, dtype=np.int64)
-    seal = np.zeros(n, dtype=bool)
-    wrench_ok = np.zeros(n, dtype=bool)
+    out = empty_result(n)
     if n == 0 or len(boxes) == 0:
-        return ContactResult(seal, wrench_ok, reason, instance)
+        return out
 
     T = np.stack([np.asarray(b.T_cam_box, dtype=np.float64) for b in boxes])  # (B, 4, 4)
     R, centre = T[:, :3, :3], T[:, :3, 3]  # box axes as columns; box centres
@@ -242,17 +319,13 @@ def evaluate_contacts(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m: np.
     s0 = s_all[rows, target]
     on = np.flatnonzero(np.isfinite(s0))
     if len(on) == 0:
-        return ContactResult(seal, wrench_ok, reason, instance)
+        return out
     b, a_on, start_on = target[on], a[on], start[on]
     face0 = face_all[on, b]
     hit0 = start_on + s0[on, None] * a_on  # (M, 3) contact point on the face
 
     # Rule 2: the rim's lines against the target box only.
-    e1, e2 = perpendicular_basis(a_on)
-    angles = 2.0 * np.pi * np.arange(cfg.ring_points) / cfg.ring_points
-    ring = cfg.cup_radius * (np.cos(angles)[None, :, None] * e1[:, None, :]
-                             + np.sin(angles)[None, :, None] * e2[:, None, :])  # (M, K, 3)
-    rim_start = start_on[:, None, :] + ring
+    rim_start = start_on[:, None, :] + rim_ring(a_on, cfg)  # (M, K, 3)
     Rb = R[b]
     rim_o = np.einsum("mkj,mji->mki", rim_start - centre[b][:, None, :], Rb)
     rim_d = np.einsum("mj,mji->mi", a_on, Rb)[:, None, :]
@@ -264,41 +337,12 @@ def evaluate_contacts(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m: np.
     # Rule 3: the rim's hits and the centre's hit must be what the camera sees there.
     pts = np.concatenate([rim_start + s_rim[..., None] * a_on[:, None, :], hit0[:, None, :]],
                          axis=1)  # (M, K + 1, 3)
-    z = pts[..., 2]
-    in_front = z > 1e-9
-    z_safe = np.where(in_front, z, 1.0)
-    u = np.rint(intrinsics.fx * pts[..., 0] / z_safe + intrinsics.cx)
-    v = np.rint(intrinsics.fy * pts[..., 1] / z_safe + intrinsics.cy)
-    inside = in_front & (u >= 0) & (u < intrinsics.width) & (v >= 0) & (v < intrinsics.height)
-    ui = np.where(inside, u, 0).astype(np.intp)
-    vi = np.where(inside, v, 0).astype(np.intp)
-    seen = (inside & (mask[vi, ui] == (b + 1)[:, None])
-            & (np.abs(depth_m[vi, ui] - z) <= cfg.visibility_tolerance))
-    occluded = ~np.all(seen, axis=1)
-    sealed = ~off_face & ~uneven & ~occluded
+    occluded = occluded_contacts(pts, b + 1, depth_m, mask, intrinsics, cfg)
 
     # Rule 4: the box's weight against the soft contact's wrench limits.
     mass = cfg.density * np.prod(size[b], axis=1)  # (M,)
-    F = (mass * cfg.gravity)[:, None] * g_dir  # (M, 3)
-    f_pull = np.einsum("mi,mi->m", F, a_on)
-    f_n = cfg.vacuum_force - f_pull
-    shear = np.linalg.norm(F - f_pull[:, None] * a_on, axis=1)
-    tau = np.cross(centre[b] - hit0, F)
-    tau_axial = np.einsum("mi,mi->m", tau, a_on)
-    bend = np.linalg.norm(tau - tau_axial[:, None] * a_on, axis=1)
-    r, mu = cfg.cup_radius, cfg.friction
-    pull = f_n < 0.0
-    slips = shear > mu * f_n
-    twists = np.abs(tau_axial) > r * mu * f_n
-    bends = bend > r * f_n
-
-    conditions = [off_face, uneven, occluded, pull, slips, twists, bends]
-    names = ["off_face", "uneven", "occluded", "pull", "shear", "torsion", "bending"]
-    reason[on] = np.select(conditions, [REASONS.index(k) for k in names], REASONS.index("ok"))
-    instance[on] = b + 1
-    seal[on] = sealed
-    wrench_ok[on] = sealed & ~(pull | slips | twists | bends)
-    return ContactResult(seal, wrench_ok, reason, instance)
+    wrench = wrench_failures(mass, centre[b], hit0, a_on, g_dir, cfg)
+    return record_rules(out, on, b + 1, off_face, uneven, occluded, wrench)
 
 
 def robust_quality(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m: np.ndarray,

@@ -74,8 +74,8 @@ import trimesh
 
 from pipeline.camera.geometry import Intrinsics, pose_matrix
 from pipeline.dexnet.contact import (  # noqa: F401  (REASONS etc. re-exported for callers)
-    REASONS, START_OFFSET, ContactResult, SuctionModelConfig, perpendicular_basis,
-    perturbed_grasps, unit_rows,
+    REASONS, START_OFFSET, ContactResult, SuctionModelConfig, checked_inputs, empty_result,
+    occluded_contacts, perturbed_grasps, record_rules, rim_ring, wrench_failures,
 )
 
 # Largest angle between a rim hit's surface normal and the centre hit's that still seals.
@@ -295,17 +295,8 @@ def evaluate_contacts_mesh(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m
     Returns:
         A ContactResult of (N,) arrays; ``instance`` is k for ``graspable[k-1]``, 0 = none.
     """
-    pts = np.asarray(points_cam, dtype=np.float64).reshape(-1, 3)
-    a = unit_rows(np.asarray(axes_cam, dtype=np.float64).reshape(-1, 3), "axes_cam")
-    if len(a) != len(pts):
-        raise ValueError(f"{len(pts)} points but {len(a)} axes")
-    shape = (intrinsics.height, intrinsics.width)
-    if depth_m.shape != shape or mask.shape != shape:
-        raise ValueError(f"depth {depth_m.shape} and mask {mask.shape} must both be (H, W) = "
-                         f"{shape}, the camera intrinsics' image size")
-    if cfg.ring_points < 3:
-        raise ValueError(f"ring_points must be >= 3, not {cfg.ring_points}")
-    g_dir = unit_rows(np.asarray(gravity_cam, dtype=np.float64).reshape(3), "gravity_cam")
+    pts, a, g_dir = checked_inputs(points_cam, axes_cam, depth_m, mask, intrinsics, gravity_cam,
+                                   cfg)
     graspable = [int(b) for b in graspable]
     n = len(pts)
     if targets is not None:
@@ -314,19 +305,16 @@ def evaluate_contacts_mesh(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m
             raise ValueError(f"{n} points but {len(targets)} targets")
         if not np.all(np.isin(targets, graspable)):
             raise ValueError("every target must be one of the graspable bodies")
-    reason = np.full(n, REASONS.index("not_on_box"), dtype=np.int8)
-    instance = np.zeros(n, dtype=np.int64)
-    seal = np.zeros(n, dtype=bool)
-    wrench_ok = np.zeros(n, dtype=bool)
+    out = empty_result(n)
     if n == 0 or not graspable:
-        return ContactResult(seal, wrench_ok, reason, instance)
+        return out
     own = rays is None
     if own:
         rays = RayScene(client)
     try:
         return _evaluate(pts, a, depth_m, mask, intrinsics, np.asarray(T_world_cam, np.float64),
                          client, graspable, g_dir, cfg, targets, rays, max_normal_angle_deg,
-                         ContactResult(seal, wrench_ok, reason, instance))
+                         out)
     finally:
         if own:
             rays.close()
@@ -348,11 +336,7 @@ def _evaluate(pts, a, depth_m, mask, intrinsics, T_wc, client, graspable, g_dir,
     m, k = len(on), cfg.ring_points
 
     # Rule 2: the rim's lines against the target only.
-    e1, e2 = perpendicular_basis(a_on)
-    angles = 2.0 * np.pi * np.arange(k) / k
-    ring = cfg.cup_radius * (np.cos(angles)[None, :, None] * e1[:, None, :]
-                             + np.sin(angles)[None, :, None] * e2[:, None, :])  # (M, K, 3)
-    rim_start = start_on[:, None, :] + ring
+    rim_start = start_on[:, None, :] + rim_ring(a_on, cfg)  # (M, K, 3)
     rim_body, s_rim, rim_normal = rays.cast(
         rim_start.reshape(-1, 3) @ R_wc.T + t_wc,
         np.repeat(a_on @ R_wc.T, k, axis=0), want=np.repeat(tgt, k))
@@ -367,45 +351,15 @@ def _evaluate(pts, a, depth_m, mask, intrinsics, T_wc, client, graspable, g_dir,
     inst = np.array([graspable.index(int(b)) + 1 for b in tgt], np.int64)
     pts3 = np.concatenate([rim_start + s_rim[..., None] * a_on[:, None, :], hit0[:, None, :]],
                           axis=1)  # (M, K + 1, 3)
-    z = pts3[..., 2]
-    in_front = z > 1e-9
-    z_safe = np.where(in_front, z, 1.0)
-    u = np.rint(intrinsics.fx * pts3[..., 0] / z_safe + intrinsics.cx)
-    v = np.rint(intrinsics.fy * pts3[..., 1] / z_safe + intrinsics.cy)
-    inside = in_front & (u >= 0) & (u < intrinsics.width) & (v >= 0) & (v < intrinsics.height)
-    ui = np.where(inside, u, 0).astype(np.intp)
-    vi = np.where(inside, v, 0).astype(np.intp)
-    seen = (inside & (mask[vi, ui] == inst[:, None])
-            & (np.abs(depth_m[vi, ui] - z) <= cfg.visibility_tolerance))
-    occluded = ~np.all(seen, axis=1)
-    sealed = ~off_face & ~uneven & ~occluded
+    occluded = occluded_contacts(pts3, inst, depth_m, mask, intrinsics, cfg)
 
     # Rule 4: the body's weight against the soft contact's wrench limits.
     mass = np.array([p.getDynamicsInfo(int(b), -1, physicsClientId=client)[0] for b in tgt])
     com_w = np.array([p.getBasePositionAndOrientation(int(b), physicsClientId=client)[0]
                       for b in tgt], np.float64).reshape(-1, 3)
     com = (com_w - t_wc) @ R_wc  # camera frame
-    F = (mass * cfg.gravity)[:, None] * g_dir  # (M, 3)
-    f_pull = np.einsum("mi,mi->m", F, a_on)
-    f_n = cfg.vacuum_force - f_pull
-    shear = np.linalg.norm(F - f_pull[:, None] * a_on, axis=1)
-    tau = np.cross(com - hit0, F)
-    tau_axial = np.einsum("mi,mi->m", tau, a_on)
-    bend = np.linalg.norm(tau - tau_axial[:, None] * a_on, axis=1)
-    r, mu = cfg.cup_radius, cfg.friction
-    pull = f_n < 0.0
-    slips = shear > mu * f_n
-    twists = np.abs(tau_axial) > r * mu * f_n
-    bends = bend > r * f_n
-
-    conditions = [off_face, uneven, occluded, pull, slips, twists, bends]
-    names = ["off_face", "uneven", "occluded", "pull", "shear", "torsion", "bending"]
-    out.reason[on] = np.select(conditions, [REASONS.index(c) for c in names],
-                               REASONS.index("ok"))
-    out.instance[on] = inst
-    out.seal[on] = sealed
-    out.wrench_ok[on] = sealed & ~(pull | slips | twists | bends)
-    return out
+    wrench = wrench_failures(mass, com, hit0, a_on, g_dir, cfg)
+    return record_rules(out, on, inst, off_face, uneven, occluded, wrench)
 
 
 def robust_quality_mesh(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m: np.ndarray,
