@@ -175,7 +175,12 @@ class SurfaceConfig:
     ransac_n: int = MISSING
     num_iterations: int = MISSING
     min_inliers: int = MISSING  # fewer points: not a surface
+    search_min_inliers: int = MISSING  # the plane search stops with fewer points left
     max_surfaces_per_object: int = MISSING
+    seed: int = MISSING  # the numpy backend's RANSAC generator
+    ransac_max_points: int = MISSING
+    refine_iterations: int = MISSING
+    connectivity: int = MISSING  # 4 or 8
     truth_min_visible_px: int = MISSING  # ground-truth faces with fewer visible pixels are ignored
     match_max_center_dist: float = MISSING  # m, detected ↔ true face matching
     match_max_normal_deg: float = MISSING

@@ -11,6 +11,7 @@ import time
 
 import numpy as np
 
+from pipeline.config.build import from_section
 from pipeline.dataset.scenes import Scene
 from pipeline.labelling.hand import hand_label
 from pipeline.labelling.surfaces import (
@@ -20,11 +21,8 @@ from pipeline.labelling.types import NG_REASONS, GraspClass
 
 
 def surface_config(cfg) -> SurfaceDetectionConfig:
-    s = cfg.surfaces
-    return SurfaceDetectionConfig(distance_threshold=s.distance_threshold, ransac_n=s.ransac_n,
-                                  ransac_backend=s.ransac_backend,
-                                  num_iterations=s.num_iterations, min_inliers=s.min_inliers,
-                                  max_surfaces_per_object=s.max_surfaces_per_object)
+    """The surface detection settings of a composed config's ``surfaces`` group."""
+    return from_section(SurfaceDetectionConfig, cfg.surfaces)
 
 
 def label_scene(scene: Scene, cfg, robot=None, bin_cfg=None

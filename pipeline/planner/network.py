@@ -31,6 +31,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from pipeline.config.build import from_section
+
 NUM_COORDS = 2  # (u, v) offset inside a cell
 
 # Darknet-19 without its classifier: (out_channels, kernel) per conv, "M" = 2×2 max-pool.
@@ -69,9 +71,7 @@ class NetworkConfig:
 
 def network_config(cfg) -> NetworkConfig:
     """The network of a composed config's ``model`` group."""
-    m = cfg.model
-    return NetworkConfig(width=float(m.width), grid=int(m.grid), input_size=int(m.input_size),
-                         num_classes=int(m.num_classes), leaky_slope=float(m.leaky_slope))
+    return from_section(NetworkConfig, cfg.model)
 
 
 def scaled(channels: int, width: float) -> int:
