@@ -4,7 +4,9 @@ from pathlib import Path
 
 from pipeline.report.ablation import ablation_table
 from pipeline.report.baseline import table2_table
-from pipeline.report.closed_loop import failures_table, path_deviation_table, table3_table
+from pipeline.report.closed_loop import (
+    failures_table, no_grasp_table, path_deviation_table, table3_table,
+)
 from pipeline.report.upstream import ArtifactInfo
 
 
@@ -44,6 +46,28 @@ def test_table3_rows_and_failures():
     assert "| 8 | 2.5 | — |" in dev  # a missing deviation (no prediction) shows as —
     f = failures_table(info).csv_text().splitlines()
     assert f[1] == "dcnn,0,0,2,0,0,0,1,1,0,0,0"
+
+
+def test_no_grasp_table_sums_the_no_grasp_endings(tmp_path):
+    """Two DCNN trials ended with no grasp (2 + 1 boxes left; 0 + 3 candidates, of which 2
+    collide and 1 repeats a failure), one ended with the bin empty; the oracle has none."""
+    import json
+
+    trials = [
+        {"planner": "dcnn", "end": "no_grasp",
+         "no_grasp": {"boxes_left": 2, "candidates": 0, "checked": 0, "rejected": {}}},
+        {"planner": "dcnn", "end": "no_grasp",
+         "no_grasp": {"boxes_left": 1, "candidates": 3, "checked": 3,
+                      "rejected": {"collision": 2, "repeat": 1}}},
+        {"planner": "dcnn", "end": "bin_empty"},
+        {"planner": "oracle", "end": "bin_empty"},
+    ]
+    (tmp_path / "trials.json").write_text(json.dumps(trials))
+    info = ArtifactInfo(tmp_path, {"metrics": {"table3": [{"planner": "dcnn"},
+                                                          {"planner": "oracle"}]}})
+    assert no_grasp_table(info).csv_text().splitlines() == [
+        "planner,trials,boxes left,candidates,rejected: collision,rejected: repeat",
+        "dcnn,2,3,3,2,1", "oracle,0,0,0,0,0"]
 
 
 def test_ablation_table_by_hand():

@@ -2,6 +2,7 @@
 the evaluation artifact (``data/evaluate/<version>``, ``report.evaluate_version``; optional).
 
 Tables ``table3_success``, ``table3_failures`` (failed attempts by kind, how trials ended),
+``table3_no_grasp`` (the trials that ended with no grasp: boxes left, rejections by reason),
 ``table3_path_deviation`` (executed vs. predicted servo path, mm) and ``table3_timing``
 (measured wall-clock figures, volatile); figure ``servo_convergence.png`` (the servo's
 translation and rotation error over simulated time).
@@ -84,6 +85,27 @@ def failures_table(info: EvaluateInfo) -> Table:
     return Table("table3_failures", headers, rows)
 
 
+def no_grasp_table(info: EvaluateInfo) -> Table:
+    """The trials that ended with "no grasp", per planner (from ``trials.json``): how many, the
+    boxes they left in the bin, the planner's candidates at that last home image, and the
+    (candidate, pattern) pairs the run-time check rejected there, per reason."""
+    import json
+
+    trials = json.loads((info.folder / "trials.json").read_text()) \
+        if (info.folder / "trials.json").exists() else []
+    ends = [t for t in trials if t.get("end") == "no_grasp" and t.get("no_grasp")]
+    reasons = sorted({k for t in ends for k in t["no_grasp"].get("rejected", {})})
+    headers = ["planner", "trials", "boxes left", "candidates",
+               *(f"rejected: {k}" for k in reasons)]
+    rows = []
+    for r in info.metrics["table3"]:
+        mine = [t["no_grasp"] for t in ends if t["planner"] == r["planner"]]
+        rows.append([r["planner"], len(mine), sum(int(n["boxes_left"]) for n in mine),
+                     sum(int(n["candidates"]) for n in mine),
+                     *(sum(int(n.get("rejected", {}).get(k, 0)) for n in mine) for k in reasons)])
+    return Table("table3_no_grasp", headers, rows)
+
+
 def table3_timing_table(info: EvaluateInfo) -> Table:
     """Measured wall-clock figures of the evaluation run (volatile)."""
     t = (info.manifest.get("timings") or {}).get("planners", {})
@@ -131,6 +153,13 @@ def render_evaluate(info: EvaluateInfo | None, tables: dict[str, Table]) -> list
         tables["table3_failures"].markdown(),
         *[f"- *{k}*: {v}" for k, v in FAILURE_MEANING.items()],
         "",
+        "The trials that ended with \"no grasp\": the boxes they left, the planner's candidates "
+        "at that home image, and why the run-time check rejected them (a robot-level NG reason; "
+        "`descriptor`: no surface at the point; `hand_fit`: the pattern's cups do not lie on "
+        "the surface; `repeat`: a retry of a failed plan; docs/closed_loop.md). Zero candidates: "
+        "the planner proposed nothing.",
+        "",
+        tables["table3_no_grasp"].markdown(),
         "The run-time check predicts the servo's camera path from home on the surface it "
         "checks (`robot.path_check`, docs/closed_loop.md). The farthest the executed camera came "
         "from that prediction, per attempt:",
@@ -138,6 +167,7 @@ def render_evaluate(info: EvaluateInfo | None, tables: dict[str, Table]) -> list
         tables["table3_path_deviation"].markdown(),
         "CSV versions: [tables/table3_success.csv](tables/table3_success.csv), "
         "[tables/table3_failures.csv](tables/table3_failures.csv), "
+        "[tables/table3_no_grasp.csv](tables/table3_no_grasp.csv), "
         "[tables/table3_path_deviation.csv](tables/table3_path_deviation.csv).",
         "",
     ]
@@ -156,8 +186,8 @@ class ClosedLoopSection(Section):
         return resolve_evaluate(ctx.root, ctx.requested("evaluate"))
 
     def tables(self, info: EvaluateInfo, ctx: Context) -> list[Table]:
-        return [table3_table(info), failures_table(info), table3_timing_table(info),
-                path_deviation_table(info)]
+        return [table3_table(info), failures_table(info), no_grasp_table(info),
+                table3_timing_table(info), path_deviation_table(info)]
 
     def figures(self, info: EvaluateInfo, ctx: Context, folder: Path) -> dict[str, str]:
         figure_servo_convergence(info.folder / "servo_convergence.csv",
