@@ -2,8 +2,8 @@
 
 The OpenGL projection is built from the intrinsics so that a rendered pixel (u, v) obeys
 ``u = fx x/z + cx``, ``v = fy y/z + cy`` for camera-frame points (OpenCV convention). pybullet's
-rasterisers sample pixel centres half a pixel away from that convention (see
-``../shared/notes/simulation.md``, "Half-pixel offset"); ``RASTER_OFFSET_PX`` compensates, and
+rasterisers sample pixel centres half a pixel away from that convention (docs/simulation.md,
+"the rasteriser needs a half-pixel correction"); ``RASTER_OFFSET_PX`` compensates, and
 ``tests/test_camera.py`` checks the result against boxes at known poses.
 """
 
