@@ -54,7 +54,7 @@ from typing import Optional
 import numpy as np
 import pybullet as p
 
-from pipeline.camera.geometry import Intrinsics
+from pipeline.camera.geometry import Intrinsics, world_to_camera
 from pipeline.picking.cell import Frame, PickCell
 
 OUTCOMES = ("success", "no_seal", "dropped", "collision", "joint_limits", "timeout",
@@ -168,13 +168,6 @@ def pattern_fits(feats, pattern: str, hand_cfg) -> bool:
     discs = SimpleNamespace(cup_diameter=float(hand_cfg.cup_diameter), margin=0.0)
     return cup_fits(half_x, half_y, float(hand_cfg.cup_offset) if cups == 2 else 0.0, discs) \
         and feats.area >= float(hand_cfg.min_area_ratio) * cups * cup_area
-
-
-def _sites_cam(T_world_cam: np.ndarray, sites_world: np.ndarray | None) -> np.ndarray | None:
-    """World points (k, 3) → the camera frame of ``T_world_cam`` (None stays None)."""
-    if sites_world is None:
-        return None
-    return (np.asarray(sites_world) - T_world_cam[:3, 3]) @ T_world_cam[:3, :3]
 
 
 def move_time(dq: np.ndarray, max_speed: float, max_accel: float) -> float:
@@ -549,7 +542,8 @@ class PickRunner:
             expected = None if normal_world is None else frame.T_world_cam[:3, :3].T @ normal_world
             feats, reason = describe_surface(frame.depth_m, intr, seed, self.descriptor_cfg,
                                              expected_normal_cam=expected,
-                                             sites_cam=_sites_cam(frame.T_world_cam, sites_world))
+                                             sites_cam=None if sites_world is None else
+                                             world_to_camera(sites_world, frame.T_world_cam))
             self.timings["descriptor_s"].append(time.perf_counter() - td)
             if feats is None:
                 att.outcome, att.lost_reason = "lost_target", str(reason)
