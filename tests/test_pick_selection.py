@@ -19,27 +19,39 @@ from pipeline.camera.geometry import project, world_to_camera
 from pipeline.labelling.types import GraspClass
 
 
-@pytest.fixture
-def runner(smoke_cfg):
+def _one_box_runner(smoke_cfg, name: str, size: list[float]):
+    """A PickRunner whose cell holds one box of ``size`` (m) flat at the bin centre, at rest."""
     from pipeline.labelling.robot_check import robot_config
     from pipeline.picking.cell import PickCell
     from pipeline.picking.trial import PickRunner
     from pipeline.robot.model import Robot
 
     cfg = smoke_cfg("evaluate", "evaluate.boxes_per_trial=1",
-                    "eval_boxes.types=[{name: medium, size: [0.145, 0.092, 0.052]}]")
+                    f"eval_boxes.types=[{{name: {name}, size: {list(size)}}}]")
     cell = PickCell(cfg, lambda: Robot(robot_config(cfg)))
     calls = []
     r = PickRunner(cfg, cell, lambda d, i, rng: calls[-1] if calls else [], "test")
     r.plans = calls  # what the planner returns next: append a list of candidates
     cell.reset(np.random.default_rng(0), 1)
-    # put the box flat at the bin centre, at rest
     (body,) = list(cell.boxes)
-    p.resetBasePositionAndOrientation(body, [0, 0, 0.026], [0, 0, 0, 1],
+    p.resetBasePositionAndOrientation(body, [0, 0, size[2] / 2], [0, 0, 0, 1],
                                       physicsClientId=cell.client)
     cell.settle()
+    return r
+
+
+@pytest.fixture
+def runner(smoke_cfg):
+    r = _one_box_runner(smoke_cfg, "medium", [0.145, 0.092, 0.052])
     yield r
-    cell.close()
+    r.cell.close()
+
+
+@pytest.fixture
+def cube_runner(smoke_cfg):
+    r = _one_box_runner(smoke_cfg, "cube", [0.06, 0.06, 0.07])
+    yield r
+    r.cell.close()
 
 
 def _pixel_of(runner, point_world):
@@ -63,14 +75,15 @@ def test_a_reachable_target_is_chosen_and_a_rejected_one_never(runner):
     # nothing passes: no grasp (the trial ends), G_opt is not run anyway
     rejected = {}
     assert runner.select(frame, [bad, bad], [], rejected) is None
-    # the point on the bin floor near a corner: the hand at that pose is in the walls
-    assert rejected == {"collision": 2}
+    # the point on the bin floor near a corner: the hand at that pose is in the walls, with B
+    # and with each single cup of the fallback (evaluate.single_cup_fallback)
+    assert rejected == {"collision": 2 * 3}
     runner.plans.append([bad])
     runner.cell.reset = lambda rng, count: None  # the trial keeps this heap
     result = runner.run_trial(0, np.random.default_rng(0), np.random.default_rng(1))
     assert result.end == "no_grasp" and result.attempts == []
     assert result.no_grasp == {"boxes_left": 1, "candidates": 1, "checked": 1,
-                               "rejected": {"collision": 1}}
+                               "rejected": {"collision": 3}}
 
 
 def test_a_retry_after_a_failure_differs(runner):
@@ -92,6 +105,10 @@ def test_a_retry_after_a_failure_differs(runner):
     frame, u, v = _pixel_of(runner, P)
     cand = SimpleNamespace(u=u, v=v, grasp_class=GraspClass.B)
     rejected = {}
+    assert runner.select(frame, [cand], failed, rejected)[:2] == (cand, "L")  # the fallback
+    assert rejected == {"repeat": 1}
+    runner.cfg.evaluate.single_cup_fallback = False
+    rejected = {}
     assert runner.select(frame, [cand], failed, rejected) is None
     assert rejected == {"repeat": 1}
     runner.cfg.evaluate.retry_policy = "repeat"
@@ -111,6 +128,33 @@ def test_single_point_tries_the_other_cup(runner):
     failed = [{"body": body, "pattern": "L", "point": np.array([0, 0, 0.052]), "position": pos,
                "quat": quat}]
     assert runner.select(frame, [cand], failed)[:2] == (cand, "R")
+
+
+def test_a_b_that_does_not_fit_is_tried_with_one_cup(cube_runner):
+    """The cube's 60 x 60 mm top face: B's cup discs (9 mm radius at ±35 mm) reach 44 mm from
+    the centre, past the 30 mm half-width, so the hand-fit gate rejects B; one cup on the
+    centre (9 mm <= 30 mm, area 3600 mm² >= 1.2 x 254 mm²) fits. With the single-cup fallback
+    the B candidate is executed with L, and after a failed L with R; without it, nothing passes
+    and the only rejection is B's fit."""
+    runner = cube_runner
+    (body,) = list(runner.cell.boxes)
+    frame, u, v = _pixel_of(runner, [0, 0, 0.07])
+    cand = SimpleNamespace(u=u, v=v, grasp_class=GraspClass.B)
+    assert runner.cfg.evaluate.single_cup_fallback  # the default
+    assert runner._patterns(cand) == ["B", "L", "R"]
+    rejected = {}
+    assert runner.select(frame, [cand], [], rejected)[:2] == (cand, "L")
+    assert rejected == {"hand_fit": 1}
+    pos, quat = runner.cell.box_pose(body)
+    failed = [{"body": body, "pattern": "L", "point": np.array([0, 0, 0.07]), "position": pos,
+               "quat": quat}]
+    assert runner.select(frame, [cand], failed)[:2] == (cand, "R")
+    # an L or R candidate has no fallback
+    assert runner._patterns(SimpleNamespace(u=u, v=v, grasp_class=GraspClass.L)) == ["L"]
+    runner.cfg.evaluate.single_cup_fallback = False
+    rejected = {}
+    assert runner.select(frame, [cand], [], rejected) is None
+    assert rejected == {"hand_fit": 1}
 
 
 def test_dexnet_alternatives_follow_the_best_by_quality():

@@ -187,6 +187,15 @@ class SurfaceConfig:
 
 
 @dataclass
+class PathSchema:
+    """The path check's sampling (``pipeline.robot.path.PathCheckConfig`` documents each field)."""
+
+    step_m: float = MISSING
+    step_deg: float = MISSING
+    bin_clearance: float = MISSING
+
+
+@dataclass
 class RobotSchema:
     """The 7-DoF robot (``pipeline.robot.RobotConfig`` documents each field)."""
 
@@ -206,9 +215,7 @@ class RobotSchema:
     collision_margin: float = MISSING
     self_collision_margin: float = MISSING
     path_check: bool = MISSING  # check the approach path, not only the grasp pose
-    path_step_m: float = MISSING
-    path_step_deg: float = MISSING
-    path_bin_clearance: float = MISSING
+    path: PathSchema = MISSING  # how the path is sampled (``pipeline.robot.path.PathCheckConfig``)
 
 
 @dataclass
@@ -279,6 +286,18 @@ class SuctionSchema:
 
 
 @dataclass
+class CropSchema:
+    """The GQ-CNN's crop and pose input (``pipeline.dexnet.gqcnn.CropConfig`` documents each
+    field; D_ground comes from ``camera`` and ``bin``)."""
+
+    window_px: int = MISSING  # crop of the depth image around a candidate, pixels
+    size: int = MISSING  # the crop resized to this (GQ-CNN input), pixels
+    depth_scale: float = MISSING  # m: crop input = (depth - candidate depth) / scale
+    missing_value: float = MISSING  # crop input where depth = 0 (no data)
+    pose_depth_scale: float = MISSING  # m: pose input = (candidate depth - D_ground) / scale
+
+
+@dataclass
 class DexNetSchema:
     """The Dex-Net-style planner: sampler, cross-entropy method, GQ-CNN, analytic quality."""
 
@@ -293,11 +312,7 @@ class DexNetSchema:
     gmm_component_frac: float = MISSING
     gmm_reg_covar: float = MISSING
     max_resamples: int = MISSING
-    crop_window_px: int = MISSING  # crop of the depth image around a candidate, pixels
-    crop_size: int = MISSING  # the crop resized to this (GQ-CNN input), pixels
-    crop_depth_scale: float = MISSING  # m: crop input = (depth - candidate depth) / scale
-    crop_missing_value: float = MISSING  # crop input where depth = 0 (no data)
-    pose_depth_scale: float = MISSING  # m: pose input = (candidate depth - D_ground) / scale
+    crop: CropSchema = MISSING  # the GQ-CNN's input (``pipeline.dexnet.gqcnn.CropConfig``)
     width: int = MISSING  # channels of the first conv layer (doubled per block)
     fc: int = MISSING
     planarity_sigma: float = MISSING  # m
@@ -334,8 +349,6 @@ class MotionSchema:
 
     max_joint_speed: float = MISSING  # rad/s per joint (xArm6: 180 deg/s)
     max_joint_accel: float = MISSING  # rad/s^2, for the point-to-point move times
-    servo_max_linear_speed: float = MISSING  # m/s, camera, during visual servoing
-    servo_max_angular_speed: float = MISSING  # rad/s
     approach_speed: float = MISSING  # m/s along the camera axis, from d* to contact
     press_depth: float = MISSING  # m, cups pressed this far past the surface
     lift_height: float = MISSING  # m, straight up with the box
@@ -367,6 +380,9 @@ class ServoSchema:
     refine: bool = MISSING
     gain: float = MISSING  # lambda
     gain_per_step: bool = MISSING
+    max_linear_speed: float = MISSING  # m/s, camera, during visual servoing
+    max_angular_speed: float = MISSING  # rad/s
+    uniform_clamp: bool = MISSING  # one clamp factor for V and Omega
     control_rate_hz: float = MISSING
     tolerance_xy: float = MISSING
     tolerance_log_z: float = MISSING
@@ -393,6 +409,7 @@ class EvaluateConfig:
     retry_moved_deg: float = MISSING
     face_split_m: float = MISSING  # split the home region at other planner points this far away
     check_hand_fit: bool = MISSING  # the run-time check tests the pattern's cups on the surface
+    single_cup_fallback: bool = MISSING  # a rejected B is tried with L, then R
     ranking_policy: str = MISSING  # "paper" (Eq. 7) | "height_tiebreak" (Sec. 8.4's proposed fix)
     inclination_tie_deg: float = MISSING  # height_tiebreak: inclinations closer than this tie
     min_area_ratio: float = MISSING  # 0: off (paper); 1.2: Sec. 8.4's surface-area safety check

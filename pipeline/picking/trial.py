@@ -212,10 +212,13 @@ class PickRunner:
     # ------------------------------------------------------------------ helpers
     def _patterns(self, cand) -> list[str]:
         """The patterns a candidate may be executed with, in order of preference: the DCNN's
-        S_opt; for a single suction point (Dex-Net), ``evaluate.dexnet_pattern`` then the other
-        cup."""
+        (or oracle's) S_opt, and with ``evaluate.single_cup_fallback`` a B followed by L, then
+        R (one cup on the surface centre: a face that two cups nearly fit, one cup fits); for
+        a single suction point (Dex-Net), ``evaluate.dexnet_pattern`` then the other cup."""
         cls = getattr(cand, "grasp_class", None)
         if cls is not None:
+            if cls.name == "B" and bool(self.cfg.evaluate.single_cup_fallback):
+                return ["B", "L", "R"]
             return [cls.name]
         preferred = str(self.cfg.evaluate.dexnet_pattern)
         if preferred == "B":
