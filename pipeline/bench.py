@@ -516,7 +516,7 @@ def dexnet_figures(cfg, num_images: int = 6) -> dict[str, float]:
               f"{out[f'plan_dexnet_{variant}_ms']:.1f} ms/image")
     net = GQCNN(gqcnn_config(full)).train()
     opt = torch.optim.Adam(net.parameters(), lr=1e-3)
-    size = int(full.dexnet.crop_size)
+    size = int(full.dexnet.crop.size)
     x, pose = torch.randn(64, 1, size, size), torch.randn(64, 2)
     y = (torch.rand(64) > 0.5).float()
     times = []

@@ -72,6 +72,13 @@ def project(points_cam: np.ndarray, intr: Intrinsics) -> np.ndarray:
     return np.stack([u, v], axis=-1)
 
 
+def ground_distance(camera_cfg, bin_cfg) -> float:
+    """D_ground (Eq. 9; the DCNN's and the GQ-CNN's input normalisation): the distance from
+    the camera at the home pose to the ground plane, metres: its height above the bin floor
+    (``camera.height_above_bin_floor``) plus the floor's thickness (``bin.floor_thickness``)."""
+    return float(camera_cfg.height_above_bin_floor) + float(bin_cfg.floor_thickness)
+
+
 def camera_pose_above_bin(height: float) -> np.ndarray:
     """``T_world_cam`` of a camera ``height`` metres above the world origin, looking down.
 

@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.camera.depth_input import check_depth_image
-from pipeline.camera.geometry import Intrinsics
+from pipeline.camera.geometry import Intrinsics, ground_distance
 from pipeline.config.build import from_section
 from pipeline.dexnet.cem import CEMConfig, CEMResult, cross_entropy_method
 from pipeline.dexnet.gqcnn import (
@@ -115,17 +115,14 @@ def cem_config(cfg) -> CEMConfig:
 
 
 def crop_config(cfg) -> CropConfig:
-    d = cfg.dexnet
-    return CropConfig(window_px=int(d.crop_window_px), size=int(d.crop_size),
-                      depth_scale=float(d.crop_depth_scale),
-                      missing_value=float(d.crop_missing_value),
-                      pose_depth_scale=float(d.pose_depth_scale),
-                      d_ground=float(cfg.camera.height_above_bin_floor + cfg.bin.floor_thickness))
+    """The GQ-CNN's crop and pose input of a composed config (``dexnet.crop``), with D_ground
+    (``pipeline.camera.geometry.ground_distance``)."""
+    return from_section(CropConfig, cfg.dexnet.crop, d_ground=ground_distance(cfg.camera, cfg.bin))
 
 
 def gqcnn_config(cfg) -> GQCNNConfig:
     """The GQ-CNN's architecture of a composed config (``conf/dexnet/``)."""
-    return from_section(GQCNNConfig, cfg.dexnet)
+    return from_section(GQCNNConfig, cfg.dexnet, crop_size=int(cfg.dexnet.crop.size))
 
 
 def planarity_config(cfg) -> PlanarityConfig:

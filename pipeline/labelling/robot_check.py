@@ -19,7 +19,6 @@ motion that fails gives the reasons "path_timeout", "path_joint_limits", "path_l
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from typing import NamedTuple, Optional
 
@@ -27,6 +26,7 @@ import numpy as np
 import pybullet as p
 
 from pipeline.camera.geometry import quat_from_matrix
+from pipeline.config.build import from_section
 from pipeline.dataset.scenes import Scene
 from pipeline.labelling.hand import HandLabel
 from pipeline.labelling.types import Surface
@@ -40,15 +40,9 @@ from pipeline.simulation.heap import build_cell
 
 
 def robot_config(cfg) -> RobotConfig:
-    """The ``RobotConfig`` for a pipeline config (``cfg.robot`` overrides the defaults)."""
-    robot_cfg = getattr(cfg, "robot", None)
-    if robot_cfg is None:
-        return RobotConfig()
-    values = {f.name: getattr(robot_cfg, f.name) for f in dataclasses.fields(RobotConfig)
-              if hasattr(robot_cfg, f.name)}
-    if "base_position" in values:
-        values["base_position"] = tuple(values["base_position"])
-    return RobotConfig(**values)
+    """The ``RobotConfig`` of a composed config (``cfg.robot``; the URDF is the project's)."""
+    return from_section(RobotConfig, cfg.robot, urdf_path=RobotConfig.urdf_path,
+                        base_position=tuple(cfg.robot.base_position))
 
 
 class RobotChecker:
@@ -122,12 +116,8 @@ class GraspCheck(NamedTuple):
 
 
 def path_config(cfg) -> PathCheckConfig | None:
-    """The path check's settings from ``cfg.robot`` (None when ``robot.path_check`` is off)."""
-    r = cfg.robot
-    if not bool(r.path_check):
-        return None
-    return PathCheckConfig(step_m=float(r.path_step_m), step_deg=float(r.path_step_deg),
-                           bin_clearance=float(r.path_bin_clearance))
+    """The path check's settings, ``cfg.robot.path`` (None when ``robot.path_check`` is off)."""
+    return from_section(PathCheckConfig, cfg.robot.path) if bool(cfg.robot.path_check) else None
 
 
 def check_grasp(robot: Robot, cfg, hand_cfg, T_world_cam: np.ndarray, centre_cam: np.ndarray,
@@ -146,7 +136,7 @@ def check_grasp(robot: Robot, cfg, hand_cfg, T_world_cam: np.ndarray, centre_cam
     :func:`pipeline.servo.predict.servo_motion`), must converge within ``servo.timeout_s``
     without running into the joint limits, and every sample of its motion
     (:func:`pipeline.robot.path.check_motion`) must be collision-free, keeping
-    ``robot.path_bin_clearance`` more from the bodies of ``bin_ids``.
+    ``robot.path.bin_clearance`` more from the bodies of ``bin_ids``.
 
     Returns:
         :class:`GraspCheck` of the first rotation that passes, else the failed check of the

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from pipeline.camera.geometry import ground_distance
 from pipeline.dataset.scenes import SceneDataset
 from pipeline.dataset.storage import read_npz
 from pipeline.planner import distributed
@@ -42,11 +43,10 @@ class Normalisation:
 
 
 def normalisation(cfg) -> Normalisation:
-    """The network input's normalisation from a composed config: D_ground = the camera's height
-    above the bin floor plus the floor's thickness (metres), ``train.depth_scale`` and
+    """The network input's normalisation from a composed config: D_ground
+    (``pipeline.camera.geometry.ground_distance``), ``train.depth_scale`` and
     ``train.missing_depth_value``."""
-    d_ground = float(cfg.camera.height_above_bin_floor + cfg.bin.floor_thickness)
-    return Normalisation(d_ground, float(cfg.train.depth_scale),
+    return Normalisation(ground_distance(cfg.camera, cfg.bin), float(cfg.train.depth_scale),
                          float(cfg.train.missing_depth_value))
 
 

@@ -32,7 +32,7 @@ import torch
 
 from pipeline.camera.depth_filter import preprocess_depth
 from pipeline.camera.depth_input import check_depth_image
-from pipeline.camera.geometry import Intrinsics
+from pipeline.camera.geometry import Intrinsics, ground_distance
 from pipeline.labelling.types import GraspClass
 from pipeline.planner.data import Normalisation, normalise_depth
 from pipeline.planner.decode import decode_output
@@ -225,10 +225,9 @@ def _has_data(depth_m: np.ndarray, u: float, v: float) -> bool:
 
 def ranking_config(cfg, threshold: float) -> RankingConfig:
     """The ranking config of a pipeline config with th = ``threshold`` (the training stage's
-    calibrated or fixed value, ``pipeline.planner.calibration``); D_ground = camera height above
-    the bin floor + floor thickness (the camera–ground distance, Eq. 9)."""
-    return RankingConfig(d_ground=float(cfg.camera.height_above_bin_floor + cfg.bin.floor_thickness),
-                         threshold=float(threshold))
+    calibrated or fixed value, ``pipeline.planner.calibration``) and D_ground
+    (``pipeline.camera.geometry.ground_distance``, Eq. 9)."""
+    return RankingConfig(d_ground=ground_distance(cfg.camera, cfg.bin), threshold=float(threshold))
 
 
 def ranking_dict(r: RankingConfig) -> dict:

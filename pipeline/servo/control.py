@@ -74,6 +74,8 @@ from typing import Optional
 
 import numpy as np
 
+from pipeline.config.build import from_section
+
 _N_X = np.array([1.0, 0.0, 0.0])
 _N_Z = np.array([0.0, 0.0, 1.0])
 _OFF_SIGN = {"L": -1.0, "B": 0.0, "R": 1.0}  # Eq. 18, in units of cup_offset
@@ -99,16 +101,10 @@ class ServoConfig:
 
 
 def servo_config(cfg) -> ServoConfig:
-    """The ``ServoConfig`` of a pipeline config: ``cfg.servo`` (gain, tolerances), d* and the
-    cup offset from ``cfg.hand``, the speed limits from ``cfg.motion``."""
-    s, m = cfg.servo, cfg.motion
-    return ServoConfig(gain=float(s.gain), standoff=float(cfg.hand.standoff),
-                       cup_offset=float(cfg.hand.cup_offset), tolerance_xy=float(s.tolerance_xy),
-                       tolerance_log_z=float(s.tolerance_log_z),
-                       tolerance_rot_deg=float(s.tolerance_rot_deg),
-                       max_linear_speed=float(m.servo_max_linear_speed),
-                       max_angular_speed=float(m.servo_max_angular_speed),
-                       gain_per_step=bool(s.gain_per_step))
+    """The ``ServoConfig`` of a composed config: ``cfg.servo`` (gain, tolerances, speed
+    limits), d* and the cup offset from ``cfg.hand``, the goal of Eqs. 17–18."""
+    return from_section(ServoConfig, cfg.servo, standoff=float(cfg.hand.standoff),
+                        cup_offset=float(cfg.hand.cup_offset), target_point=None)
 
 
 @dataclass

@@ -1,23 +1,8 @@
-"""Stage logs written to Rerun (.rrd) and Foxglove MCAP (.mcap) in lock-step, plus read-back helpers."""
+"""Stage logs written to Rerun (.rrd) and Foxglove MCAP (.mcap) in lock-step, plus read-back helpers.
 
-from pipeline.tracking.stage_log import (  # noqa: F401
-    StageLog,
-    default_blueprint,
-    mcap_message_counts,
-    rrd_entity_paths,
-    rrd_equal,
-    rrd_recording_id,
-    rrd_timelines,
-    topic_for,
-)
+The public names are those of ``pipeline.tracking.stage_log`` (its ``__all__``)."""
 
-__all__ = [
-    "StageLog",
-    "default_blueprint",
-    "mcap_message_counts",
-    "rrd_entity_paths",
-    "rrd_equal",
-    "rrd_recording_id",
-    "rrd_timelines",
-    "topic_for",
-]
+from pipeline.tracking import stage_log
+from pipeline.tracking.stage_log import *  # noqa: F401,F403
+
+__all__ = list(stage_log.__all__)
