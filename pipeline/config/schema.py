@@ -298,6 +298,15 @@ class CropSchema:
 
 
 @dataclass
+class PlanaritySchema:
+    """The analytic disc-planarity quality (``pipeline.dexnet.quality.PlanarityConfig``; the cup
+    radius comes from ``hand.cup_diameter``)."""
+
+    sigma: float = MISSING  # m
+    min_coverage: float = MISSING
+
+
+@dataclass
 class DexNetSchema:
     """The Dex-Net-style planner: sampler, cross-entropy method, GQ-CNN, analytic quality."""
 
@@ -315,8 +324,7 @@ class DexNetSchema:
     crop: CropSchema = MISSING  # the GQ-CNN's input (``pipeline.dexnet.gqcnn.CropConfig``)
     width: int = MISSING  # channels of the first conv layer (doubled per block)
     fc: int = MISSING
-    planarity_sigma: float = MISSING  # m
-    planarity_min_coverage: float = MISSING
+    planarity: PlanaritySchema = MISSING  # the analytic variant (``dexnet.quality.PlanarityConfig``)
     object_margin: float = MISSING  # m: object mask = depth at least this above the bin floor
 
 

@@ -126,10 +126,10 @@ def gqcnn_config(cfg) -> GQCNNConfig:
 
 
 def planarity_config(cfg) -> PlanarityConfig:
-    d = cfg.dexnet
-    return PlanarityConfig(cup_radius=float(cfg.hand.cup_diameter) / 2.0,
-                           sigma=float(d.planarity_sigma),
-                           min_coverage=float(d.planarity_min_coverage))
+    """The analytic disc-planarity quality of a composed config (``dexnet.planarity``), with
+    the cup radius ``hand.cup_diameter`` / 2."""
+    return from_section(PlanarityConfig, cfg.dexnet.planarity,
+                        cup_radius=float(cfg.hand.cup_diameter) / 2.0)
 
 
 def workspace(cfg, T_world_cam: np.ndarray) -> Workspace:
