@@ -318,7 +318,7 @@ def planning_times(cfg, num_images: int = 8, repeats: int = 3) -> dict[str, floa
     from pipeline.artifacts.fingerprint import REPO_ROOT
     from pipeline.cli import compose
     from pipeline.planner.data import Normalisation
-    from pipeline.planner.network import GraspNet, NetworkConfig
+    from pipeline.planner.network import GraspNet, network_config
     from pipeline.planner.planner import Planner, ranking_config
     torch.set_num_threads(2)
     scenes = bench_scenes(cfg, num_images)
@@ -330,7 +330,7 @@ def planning_times(cfg, num_images: int = 8, repeats: int = 3) -> dict[str, floa
         if name == "default" and trained.is_file():
             planner, label = Planner.load(trained.parent), "trained"
         else:
-            net = GraspNet(NetworkConfig(width=full.model.width))
+            net = GraspNet(network_config(full))
             rk = ranking_config(full, min(full.train.threshold_grid))
             planner = Planner(net, Normalisation(rk.d_ground, 0.1, 0.5), rk)
             label = "untrained"
@@ -375,10 +375,9 @@ def _training_memory_child(experiment: str, root: str | None, steps: int, loader
     from pipeline.dataset.labels import LabelSet
     from pipeline.planner.data import GraspDataset, make_loader
     from pipeline.planner.distributed import DistContext
-    from pipeline.planner.loss import LossConfig, grasp_loss
-    from pipeline.planner.network import GraspNet
+    from pipeline.planner.loss import grasp_loss, loss_config
     from pipeline.planner.data import epoch_batches, normalisation
-    from pipeline.planner.network import network_config
+    from pipeline.planner.network import GraspNet, network_config
 
     overrides = [f"experiment={experiment}"] + ([f"paths.root={root}"] if root else [])
     overrides += [f"model.width={width}"] if width is not None else []
@@ -410,7 +409,7 @@ def _training_memory_child(experiment: str, root: str | None, steps: int, loader
     torch.manual_seed(0)
     net = GraspNet(net_cfg)
     opt = torch.optim.Adam(net.parameters(), lr=1e-4)
-    loss_cfg = LossConfig(alpha=0.25, gamma=2.0, lambda_coord=1.0, lambda_class=1.0)
+    loss_cfg = loss_config(cfg)
     net.train()
     t0 = time.perf_counter()
     for x, targets in make_loader(train, batches[:steps], loader_workers):
@@ -445,22 +444,23 @@ def training_memory(experiment: str = "paper", root: str | None = None, steps: i
     return json.loads(line[len("RESULT "):])
 
 
-def training_images_per_s(width: float, batch: int = 16, steps: int = 4,
+def training_images_per_s(cfg, width: float, batch: int = 16, steps: int = 4,
                           channels_last: bool = False) -> float:
     """Training throughput (forward + focal loss + backward + Adam step), CPU, 2 threads, on
     random depth-like inputs with 10 random grasp points per image, in the contiguous or the
-    channels-last memory layout (``train.channels_last``)."""
+    channels-last memory layout (``train.channels_last``); ``cfg``'s network at ``width``."""
     import torch
 
-    from pipeline.planner.loss import grasp_loss
-    from pipeline.planner.network import GraspNet, NetworkConfig
+    from pipeline.planner.loss import grasp_loss, loss_config
+    from pipeline.planner.network import GraspNet, network_config
     from pipeline.planner.targets import encode, stack_targets
 
     torch.set_num_threads(2)
     torch.manual_seed(0)
     rng = np.random.default_rng(0)
     layout = torch.channels_last if channels_last else torch.contiguous_format
-    net = GraspNet(NetworkConfig(width=width)).train().to(memory_format=layout)
+    net_cfg = dataclasses.replace(network_config(cfg), width=width)
+    net = GraspNet(net_cfg).train().to(memory_format=layout)
     opt = torch.optim.Adam(net.parameters(), lr=1e-4)
     x = torch.randn(batch, 1, 416, 416).to(memory_format=layout)
     targets = stack_targets([encode(rng.uniform(0, 415, (10, 2)), rng.integers(0, 4, 10))
@@ -469,7 +469,7 @@ def training_images_per_s(width: float, batch: int = 16, steps: int = 4,
     for _ in range(steps + 1):  # the first step warms up
         t0 = time.perf_counter()
         opt.zero_grad()
-        grasp_loss(net(x), targets)["total"].backward()
+        grasp_loss(net(x), targets, loss_config(cfg))["total"].backward()
         opt.step()
         times.append(time.perf_counter() - t0)
     return batch / float(np.median(times[1:]))
@@ -779,7 +779,7 @@ def main(argv: list[str] | None = None) -> int:
     # the default network in both layouts, and the one twice as wide, in the same run
     for key, w, last in (("default", width, False), ("default_channels_last", width, True),
                          ("wide_channels_last", 2 * width, True)):
-        results[f"train_{key}_images_per_s"] = training_images_per_s(w, channels_last=last)
+        results[f"train_{key}_images_per_s"] = training_images_per_s(cfg, w, channels_last=last)
     contiguous, channels_last, wide = (results[f"train_{k}_images_per_s"] for k in
                                        ("default", "default_channels_last", "wide_channels_last"))
     print(f"training, default network (width {width}), batch 16: {contiguous:.1f} images/s "

@@ -78,7 +78,7 @@ from pipeline.planner.calibration import choose_threshold, threshold_curve
 from pipeline.planner import distributed
 from pipeline.planner.data import GraspDataset, epoch_batches, make_loader, normalisation
 from pipeline.planner.evaluate import downsample_curve
-from pipeline.planner.loss import LossConfig, grasp_loss
+from pipeline.planner.loss import LossConfig, grasp_loss, loss_config
 from pipeline.planner.network import GraspNet, count_flops, count_parameters, network_config
 from pipeline.planner.planner import MODEL_FILE, Planner, pick_device, ranking_config
 from pipeline.planner.scoring import EVAL_BATCH, ranked_images, table1
@@ -281,9 +281,7 @@ def train(cfg: DictConfig) -> Path | None:
     seed, tc = int(cfg.seed), cfg.train
     progress = bool(cfg.logging.progress) and ctx.is_main
     net_cfg, norm = network_config(cfg), normalisation(cfg)
-    loss_cfg = LossConfig(alpha=float(tc.alpha), gamma=float(tc.gamma),
-                          lambda_coord=float(tc.lambda_coord),
-                          lambda_class=float(tc.lambda_class))
+    loss_cfg = loss_config(cfg)
     batch = int(tc.batch_size)
     # channels_last: the same arithmetic in another memory layout (faster convolutions on CPU).
     memory_format = torch.channels_last if bool(tc.channels_last) else torch.contiguous_format

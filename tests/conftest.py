@@ -3,6 +3,8 @@ one smoke pipeline (generation, labels, a trained network) built once per test s
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,13 +21,84 @@ SMOKE_SCENES = ("generate.num_scenes=4", "generate.num_val_scenes=1", "generate.
                 "train.device=cpu")
 
 
+@functools.lru_cache(maxsize=None)
+def composed(*overrides: str):
+    """The composed configuration (``conf/``, the smoke experiment) with ``overrides``, composed
+    once per test session and set of overrides (read-only: do not change it)."""
+    return compose("generate", ["experiment=smoke", *overrides])
+
+
 def conf_section(name: str, *overrides: str):
     """The ``name`` section of the composed configuration (``conf/``, the smoke experiment) as its
     schema dataclass, e.g. ``conf_section("hand")`` → ``HandConfig``: the values live in YAML
     only, so tests take them from there."""
     from omegaconf import OmegaConf
 
-    return OmegaConf.to_object(compose("generate", ["experiment=smoke", *overrides])[name])
+    return OmegaConf.to_object(composed(*overrides)[name])
+
+
+def _config_builders() -> dict:
+    """Each algorithm settings class → (the pipeline's builder of it from a composed config, the
+    fields a caller gives it). One table, so tests build their settings as the stages do."""
+    from pipeline.dexnet.cem import CEMConfig
+    from pipeline.dexnet.contact import SuctionModelConfig, suction_model_config
+    from pipeline.dexnet.gqcnn import CropConfig, GQCNNConfig
+    from pipeline.dexnet.planner import (
+        cem_config, crop_config, gqcnn_config, planarity_config, sampler_config,
+    )
+    from pipeline.dexnet.quality import PlanarityConfig
+    from pipeline.dexnet.sampling import SamplerConfig
+    from pipeline.labelling.robot_check import path_config, robot_config
+    from pipeline.labelling.scene import surface_config
+    from pipeline.labelling.surfaces import SurfaceDetectionConfig
+    from pipeline.planner.loss import LossConfig, loss_config
+    from pipeline.planner.network import NetworkConfig, network_config
+    from pipeline.planner.planner import ranking_config
+    from pipeline.planner.ranking import RankingConfig
+    from pipeline.robot.model import RobotConfig
+    from pipeline.robot.path import PathCheckConfig
+    from pipeline.servo.control import ServoConfig, servo_config
+    from pipeline.servo.descriptor import DescriptorConfig, descriptor_config
+
+    return {
+        CEMConfig: (cem_config, ()),
+        # the heaps' boxes (``boxes.density``), as the labelling and baseline stages use it
+        SuctionModelConfig: (lambda c: suction_model_config(c, float(c.boxes.density)), ()),
+        CropConfig: (crop_config, ()),
+        GQCNNConfig: (gqcnn_config, ()),
+        PlanarityConfig: (planarity_config, ()),
+        SamplerConfig: (sampler_config, ()),
+        SurfaceDetectionConfig: (surface_config, ()),
+        LossConfig: (loss_config, ()),
+        NetworkConfig: (network_config, ()),
+        # th is the training stage's calibrated value: the test gives it
+        RankingConfig: (ranking_config, ("threshold",)),
+        RobotConfig: (robot_config, ()),
+        PathCheckConfig: (path_config, ()),
+        ServoConfig: (servo_config, ()),
+        DescriptorConfig: (descriptor_config, ()),
+    }
+
+
+def default_config(cls, **overrides):
+    """The ``cls`` settings (e.g. ``SamplerConfig``) the pipeline builds from the composed
+    configuration (``composed()``), with the fields in ``overrides`` replaced: the values live in
+    ``conf/`` only, so tests take them from there. Fields the caller gives the pipeline's builder
+    (``RankingConfig``'s ``threshold``) must be in ``overrides``."""
+    builders = _config_builders()
+    if cls not in builders:
+        raise TypeError(f"default_config knows no builder for {cls!r}: add it to "
+                        "tests/conftest.py's _config_builders")
+    build, given = builders[cls]
+    missing = [name for name in given if name not in overrides]
+    if missing:
+        raise TypeError(f"default_config({cls.__name__}) needs {missing} in its overrides: "
+                        "the pipeline's builder takes them from its caller")
+    obj = build(composed(), **{name: overrides.pop(name) for name in given})
+    if obj is None:
+        raise ValueError(f"the composed config builds no {cls.__name__} (e.g. robot.path_check "
+                         "is false)")
+    return dataclasses.replace(obj, **overrides)
 
 
 def smoke_overrides(root: Path, *extra: str) -> list[str]:

@@ -20,7 +20,7 @@ from pipeline.artifacts import (
     ArtifactError, artifact_file, load_manifest, resolve_artifact, verify_artifact,
 )
 from pipeline.artifacts.fingerprint import sha256_file
-from conftest import smoke_overrides
+from conftest import default_config, smoke_overrides
 from pipeline.cli import MissingLibraryError, compose, import_with_fix, stage_main
 from pipeline.dataset.scenes import SceneDataset
 from pipeline.dataset.labels import LabelSet
@@ -299,7 +299,7 @@ def _other_network_checkpoint(path: Path) -> None:
     from pipeline.planner.network import GraspNet, NetworkConfig
 
     ckpt = torch.load(path, weights_only=True)
-    ckpt["model"] = GraspNet(NetworkConfig(width=0.125)).state_dict()
+    ckpt["model"] = GraspNet(default_config(NetworkConfig, width=0.125)).state_dict()
     torch.save(ckpt, path)
 
 

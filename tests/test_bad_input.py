@@ -24,6 +24,7 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
+from conftest import default_config
 from pipeline.camera.depth_input import MAX_DEPTH_M, MIN_DEPTH_M, DepthImageError, check_depth_image
 from pipeline.camera.geometry import Intrinsics, camera_pose_above_bin
 from pipeline.dexnet.cem import CEMConfig
@@ -47,6 +48,8 @@ D_GROUND = 0.645  # + floor thickness
 SR300 = Intrinsics(416, 416, 411.7, 411.7, 207.5, 207.5)
 SMALL = Intrinsics(32, 32, 40.0, 40.0, 15.5, 15.5)  # Dex-Net: ~1.2 cm/px at 0.5 m
 MID = Intrinsics(48, 48, 60.0, 60.0, 23.5, 23.5)  # descriptor
+# conf/servo/'s descriptor, its window-depth tolerance and normal tracking off
+DESCRIPTOR = default_config(DescriptorConfig, window_tolerance_depth=0.0, track_normal_deg=0.0)
 
 BAD_VALUES = [np.nan, np.inf, -np.inf, 0.0, -0.5, -1e30, 1e-30, 0.01, 50.0, 1e30,
               float(np.finfo(np.float32).max), 1e300]
@@ -112,14 +115,14 @@ def dcnn_planner(firing: bool) -> Planner:
     so that (almost) every cell predicts R/L/B with spread-out offsets: candidates everywhere,
     near holes and edges too; else the initial class prior (no cell above th = 0.5)."""
     torch.manual_seed(0)
-    net = GraspNet(NetworkConfig(width=0.0625))
+    net = GraspNet(default_config(NetworkConfig, width=0.0625))
     if firing:
         with torch.no_grad():
             net.out.weight.mul_(200.0)
             net.out.bias[2:5] = 4.0
             net.out.bias[5] = -4.0  # NG
     return Planner(net, Normalisation(D_GROUND, 0.1, 0.5),
-                   RankingConfig(d_ground=D_GROUND, threshold=0.5))
+                   default_config(RankingConfig, d_ground=D_GROUND, threshold=0.5))
 
 
 @pytest.fixture(scope="module")
@@ -141,11 +144,13 @@ def dexnet_planners(cem: CEMConfig | None = None, half: float = 0.3) -> list[Dex
     """Planarity and (untrained) GQ-CNN planners on SMALL images; ``half``: the bin's inner
     half-extent, m (0.3: the whole image is inside the bin)."""
     ws = Workspace(half, half, 0.005, camera_pose_above_bin(FLOOR))
-    sampler = SamplerConfig(border_px=2)
-    cem = cem or CEMConfig(num_seed_samples=16, num_gmm_samples=8, num_iters=1, max_resamples=3)
-    crop = CropConfig(window_px=8, size=8, d_ground=D_GROUND)
-    return [DexNetPlanner("planarity", ws, sampler, cem, PlanarityConfig()),
-            DexNetPlanner("gqcnn", ws, sampler, cem, PlanarityConfig(), crop, tiny_gqcnn())]
+    sampler = default_config(SamplerConfig, border_px=2)
+    cem = cem or default_config(CEMConfig, num_seed_samples=16, num_gmm_samples=8, num_iters=1,
+                                max_resamples=3)
+    crop = default_config(CropConfig, window_px=8, size=8, d_ground=D_GROUND)
+    return [DexNetPlanner("planarity", ws, sampler, cem, default_config(PlanarityConfig)),
+            DexNetPlanner("gqcnn", ws, sampler, cem, default_config(PlanarityConfig), crop,
+                          tiny_gqcnn())]
 
 
 @pytest.fixture(scope="module")
@@ -275,7 +280,8 @@ def test_dexnet_plan_never_fails_and_grasps_only_valid_pixels(dexnets, image):
        st.sampled_from([0, 2]))
 def test_descriptor_returns_features_or_a_documented_reason(image, seed, smoothing):
     before = image.copy()
-    result = describe_surface(image, MID, seed, DescriptorConfig(normal_smoothing=smoothing))
+    cfg = dataclasses.replace(DESCRIPTOR, normal_smoothing=smoothing)
+    result = describe_surface(image, MID, seed, cfg)
     assert unchanged(before, image)
     assert_descriptor_result(image, result)
     event(f"descriptor: {result[1] or 'features'}")
@@ -348,7 +354,7 @@ def test_dexnet_few_acceptable_pixels_with_the_full_cem(count):
     centres = [(6, 6), (6, 20), (20, 6), (20, 20), (13, 13)][:count]  # (v, u)
     for v, u in centres:
         d[v - 1:v + 2, u - 1:u + 2] = 0.5
-    for planner in dexnet_planners(CEMConfig()):
+    for planner in dexnet_planners(default_config(CEMConfig)):
         out = planner.plan(d, SMALL)
         assert len(out) == 1 and (int(out[0].v), int(out[0].u)) in centres
         assert_dex_result(planner, d, out)
@@ -357,7 +363,7 @@ def test_dexnet_few_acceptable_pixels_with_the_full_cem(count):
 @pytest.mark.parametrize("name", list(EXAMPLES))
 def test_descriptor_examples(name):
     image = EXAMPLES[name](MID)
-    result = describe_surface(image, MID, (MID.width // 2, MID.height // 2))
+    result = describe_surface(image, MID, (MID.width // 2, MID.height // 2), DESCRIPTOR)
     assert_descriptor_result(image, result)
     expected = {"empty_bin": "", "one_pixel": "too_few_window_points"}.get(name,
                                                                           "no_depth_at_seed")
@@ -369,7 +375,7 @@ def test_descriptor_examples(name):
 @pytest.mark.parametrize("seed", [(np.nan, 3.0), (np.inf, np.inf), (-1e9, 5.0), (4.0, 1e30)])
 def test_descriptor_non_finite_or_far_seed(seed):
     image = floor_only(MID)
-    assert describe_surface(image, MID, seed) == (None, "seed_outside_image")
+    assert describe_surface(image, MID, seed, DESCRIPTOR) == (None, "seed_outside_image")
 
 
 BAD_INPUTS = {  # name → (image maker, message pattern)
@@ -404,7 +410,7 @@ def test_bad_shape_or_dtype_raise_our_value_error_everywhere(firing, dexnets, na
         with pytest.raises(DepthImageError, match=pattern):
             planner.run_cem(make(32, 32), SMALL, np.random.default_rng(0))
     with pytest.raises(DepthImageError, match=pattern):
-        describe_surface(make(48, 48), MID, (24, 24))
+        describe_surface(make(48, 48), MID, (24, 24), DESCRIPTOR)
     assert isinstance(DepthImageError("x"), ValueError)
 
 
@@ -422,7 +428,7 @@ def test_dcnn_predict_batches_and_empty_batch(firing):
 
 def test_descriptor_rejects_a_malformed_seed():
     with pytest.raises(ValueError, match="seed_uv"):
-        describe_surface(floor_only(MID), MID, (1.0, 2.0, 3.0))
+        describe_surface(floor_only(MID), MID, (1.0, 2.0, 3.0), DESCRIPTOR)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -433,7 +439,8 @@ def model_blob(net: GraspNet, network: dict | None = None) -> dict:
     return {"state_dict": net.state_dict(),
             "network": network or dataclasses.asdict(net.cfg),
             "normalisation": Normalisation(D_GROUND, 0.1, 0.5).as_dict(),
-            "ranking": dataclasses.asdict(RankingConfig(d_ground=D_GROUND)),
+            "ranking": dataclasses.asdict(default_config(RankingConfig, d_ground=D_GROUND,
+                                                          threshold=0.5)),
             "classes": ["R", "L", "B", "NG"]}
 
 
@@ -441,8 +448,8 @@ def model_blob(net: GraspNet, network: dict | None = None) -> dict:
 def model_files(tmp_path_factory):
     folder = tmp_path_factory.mktemp("models")
     torch.manual_seed(0)
-    net = GraspNet(NetworkConfig(width=0.0625))
-    small = GraspNet(NetworkConfig(width=1 / 32))
+    net = GraspNet(default_config(NetworkConfig, width=0.0625))
+    small = GraspNet(default_config(NetworkConfig, width=1 / 32))
     sd = net.state_dict()
     blobs = {
         "good": model_blob(net),
@@ -491,7 +498,7 @@ def test_planner_load_names_file_problem_and_fix(model_files, name, pattern):
 
 def test_load_gqcnn_names_file_problem_and_fix(tmp_path, model_files):
     g = tiny_gqcnn()
-    crop = dataclasses.asdict(CropConfig())
+    crop = dataclasses.asdict(default_config(CropConfig))
     torch.save({"network": {"crop_size": 8, "width": 2, "fc": 8}, "crop": crop,
                 "state_dict": g.state_dict()}, tmp_path / "good.pt")
     net, _ = load_gqcnn(tmp_path / "good.pt")

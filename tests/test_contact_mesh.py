@@ -20,6 +20,7 @@ import numpy as np
 import pybullet as p
 import pytest
 
+from conftest import default_config
 from pipeline.camera.geometry import Intrinsics, backproject, camera_pose_above_bin, pose_matrix
 from pipeline.camera.render import render_depth
 from pipeline.dexnet.contact import REASONS, SuctionModelConfig, evaluate_contacts, robust_quality
@@ -28,7 +29,7 @@ from pipeline.dexnet.contact_mesh import (
 )
 from pipeline.simulation.objects import create_body, cylinder
 
-CFG = SuctionModelConfig()
+CFG = default_config(SuctionModelConfig)
 DENSITY = 400.0
 DOWN = np.array([0.0, 0.0, 1.0])  # gravity in the looking-down camera's frame
 T_DOWN = camera_pose_above_bin(0.55)

@@ -6,11 +6,13 @@ Camera: 200 x 200 px, fx = fy = 200, cx = cy = 99.5; level plane at 0.5 m. With 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 
+from conftest import default_config
 import pipeline.dexnet.cem as cem_mod
 from pipeline.camera.geometry import Intrinsics
 from pipeline.dexnet.cem import CEMConfig, cross_entropy_method
@@ -18,11 +20,12 @@ from pipeline.dexnet.sampling import SamplerConfig, point_cloud_image
 
 INTR = Intrinsics(200, 200, 200.0, 200.0, 99.5, 99.5)
 TARGET = np.array([120, 80])
+CEM, SAMPLER = default_config(CEMConfig), default_config(SamplerConfig)  # conf/dexnet/
 
 
 @pytest.fixture(scope="module")
 def cloud():
-    return point_cloud_image(np.full((200, 200), 0.5), INTR)
+    return point_cloud_image(np.full((200, 200), 0.5), INTR, SAMPLER)
 
 
 def peak(cands):
@@ -48,7 +51,7 @@ def components(monkeypatch):
 def test_default_sizes(cloud, components):
     # 200 seeds -> ceil(0.25 * 200) = 50 elites, ceil(0.4 * 50) = 20 components -> 50 samples
     # -> ceil(0.25 * 50) = 13 elites, ceil(0.4 * 13) = 6 components -> 50 -> 13 -> final 50.
-    res = cross_entropy_method(cloud, peak, CEMConfig(), SamplerConfig(), np.random.default_rng(0))
+    res = cross_entropy_method(cloud, peak, CEM, SAMPLER, np.random.default_rng(0))
     assert [len(it.candidates) for it in res.iterations] == [200, 50, 50, 50]
     assert [len(it.scores) for it in res.iterations] == [200, 50, 50, 50]
     assert [len(it.elite_idx) for it in res.iterations] == [50, 13, 13, 1]
@@ -67,9 +70,9 @@ def test_default_sizes(cloud, components):
 def test_changed_parameters(cloud, components):
     # 40 seeds -> ceil(0.5 * 40) = 20 elites, ceil(0.1 * 20) = 2 components -> 15 samples
     # -> ceil(0.5 * 15) = 8 elites, ceil(0.1 * 8) = 1 component -> 15 -> final 15.
-    cfg = CEMConfig(num_seed_samples=40, num_gmm_samples=15, num_iters=2, gmm_refit_p=0.5,
-                    gmm_component_frac=0.1)
-    res = cross_entropy_method(cloud, peak, cfg, SamplerConfig(), np.random.default_rng(1))
+    cfg = dataclasses.replace(CEM, num_seed_samples=40, num_gmm_samples=15, num_iters=2,
+                              gmm_refit_p=0.5, gmm_component_frac=0.1)
+    res = cross_entropy_method(cloud, peak, cfg, SAMPLER, np.random.default_rng(1))
     assert [len(it.candidates) for it in res.iterations] == [40, 15, 15]
     assert [len(it.elite_idx) for it in res.iterations] == [20, 8, 1]
     assert components == [(2, 20), (1, 8)]
@@ -77,7 +80,7 @@ def test_changed_parameters(cloud, components):
 
 
 def test_zero_iterations_returns_argmax_of_seeds(cloud, components):
-    res = cross_entropy_method(cloud, peak, CEMConfig(num_iters=0), SamplerConfig(),
+    res = cross_entropy_method(cloud, peak, dataclasses.replace(CEM, num_iters=0), SAMPLER,
                                np.random.default_rng(2))
     assert [len(it.candidates) for it in res.iterations] == [200]
     assert components == []
@@ -86,16 +89,16 @@ def test_zero_iterations_returns_argmax_of_seeds(cloud, components):
 
 def test_components_never_exceed_elites(cloud, components):
     # frac 1.0 with 3 elites -> 3 components (not more than the 3 points).
-    cfg = CEMConfig(num_seed_samples=10, num_gmm_samples=10, num_iters=1, gmm_refit_p=0.25,
-                    gmm_component_frac=1.0)
-    res = cross_entropy_method(cloud, peak, cfg, SamplerConfig(), np.random.default_rng(3))
+    cfg = dataclasses.replace(CEM, num_seed_samples=10, num_gmm_samples=10, num_iters=1,
+                              gmm_refit_p=0.25, gmm_component_frac=1.0)
+    res = cross_entropy_method(cloud, peak, cfg, SAMPLER, np.random.default_rng(3))
     assert components == [(3, 3)]
     assert [len(it.candidates) for it in res.iterations] == [10, 10]
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_best_lands_near_the_peak(cloud, seed):
-    res = cross_entropy_method(cloud, peak, CEMConfig(), SamplerConfig(),
+    res = cross_entropy_method(cloud, peak, CEM, SAMPLER,
                                np.random.default_rng(seed))
     # Dex-Net returns the argmax of the *final* set of 50, so "a few pixels", not exactly 0
     # (over 60 seeds: median 2 px, worst 4.5 px) ...
@@ -112,21 +115,22 @@ def test_best_lands_near_the_peak(cloud, seed):
 
 
 def test_deterministic_for_same_seed(cloud):
-    a = cross_entropy_method(cloud, peak, CEMConfig(), SamplerConfig(), np.random.default_rng(42))
-    b = cross_entropy_method(cloud, peak, CEMConfig(), SamplerConfig(), np.random.default_rng(42))
+    a = cross_entropy_method(cloud, peak, CEM, SAMPLER, np.random.default_rng(42))
+    b = cross_entropy_method(cloud, peak, CEM, SAMPLER, np.random.default_rng(42))
     assert len(a.iterations) == len(b.iterations)
     for ia, ib in zip(a.iterations, b.iterations):
         np.testing.assert_array_equal(ia.candidates.uv, ib.candidates.uv)
         np.testing.assert_array_equal(ia.elite_idx, ib.elite_idx)
     np.testing.assert_array_equal(a.best.uv, b.best.uv)
-    c = cross_entropy_method(cloud, peak, CEMConfig(), SamplerConfig(), np.random.default_rng(43))
+    c = cross_entropy_method(cloud, peak, CEM, SAMPLER, np.random.default_rng(43))
     assert not np.array_equal(a.iterations[1].candidates.uv, c.iterations[1].candidates.uv)
 
 
 def test_ties_broken_by_order_and_nan_is_worst(cloud):
     # Constant scores: elites are the first ceil(0.25 N) candidates (stable sort).
-    res = cross_entropy_method(cloud, lambda c: np.zeros(len(c)), CEMConfig(num_iters=1),
-                               SamplerConfig(), np.random.default_rng(4))
+    res = cross_entropy_method(cloud, lambda c: np.zeros(len(c)),
+                               dataclasses.replace(CEM, num_iters=1), SAMPLER,
+                               np.random.default_rng(4))
     np.testing.assert_array_equal(res.iterations[0].elite_idx, np.arange(50))
 
     def nan_but_peak(c):
@@ -134,7 +138,7 @@ def test_ties_broken_by_order_and_nan_is_worst(cloud):
         s[::2] = np.nan
         return s
 
-    res = cross_entropy_method(cloud, nan_but_peak, CEMConfig(), SamplerConfig(),
+    res = cross_entropy_method(cloud, nan_but_peak, CEM, SAMPLER,
                                np.random.default_rng(5))
     assert np.isfinite(res.best_score)
     for it in res.iterations:
@@ -142,11 +146,11 @@ def test_ties_broken_by_order_and_nan_is_worst(cloud):
 
 
 def test_empty_valid_mask_gives_empty_result():
-    empty = point_cloud_image(np.full((200, 200), 0.5), INTR,
+    empty = point_cloud_image(np.full((200, 200), 0.5), INTR, SAMPLER,
                               object_mask=np.zeros((200, 200), bool))
     calls = []
-    res = cross_entropy_method(empty, lambda c: calls.append(len(c)) or peak(c), CEMConfig(),
-                               SamplerConfig(), np.random.default_rng(6))
+    res = cross_entropy_method(empty, lambda c: calls.append(len(c)) or peak(c), CEM,
+                               SAMPLER, np.random.default_rng(6))
     assert len(res.best) == 0 and res.best_score == -math.inf
     assert res.iterations == [] and res.num_scored == 0 and calls == []
 
@@ -156,8 +160,8 @@ def test_tiny_region_and_duplicate_elites(cloud):
     # pixels (fewer distinct points than components) without warnings escaping.
     mask = np.zeros((200, 200), bool)
     mask[100:102, 100:102] = True
-    small = point_cloud_image(np.full((200, 200), 0.5), INTR, object_mask=mask)
-    res = cross_entropy_method(small, peak, CEMConfig(), SamplerConfig(),
+    small = point_cloud_image(np.full((200, 200), 0.5), INTR, SAMPLER, object_mask=mask)
+    res = cross_entropy_method(small, peak, CEM, SAMPLER,
                                np.random.default_rng(7))
     assert len(res.iterations[0].candidates) == 4
     for it in res.iterations:
@@ -167,5 +171,5 @@ def test_tiny_region_and_duplicate_elites(cloud):
 
 def test_score_fn_shape_is_checked(cloud):
     with pytest.raises(ValueError):
-        cross_entropy_method(cloud, lambda c: np.zeros(3), CEMConfig(), SamplerConfig(),
+        cross_entropy_method(cloud, lambda c: np.zeros(3), CEM, SAMPLER,
                              np.random.default_rng(8))

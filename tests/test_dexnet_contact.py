@@ -19,13 +19,14 @@ from types import SimpleNamespace as NS
 import numpy as np
 import pytest
 
+from conftest import default_config
 from pipeline.camera.geometry import Intrinsics
 from pipeline.dexnet.contact import (
     REASONS, SuctionModelConfig, evaluate_contacts, robust_quality,
 )
 
 INTR = Intrinsics(120, 120, 150.0, 150.0, 59.5, 59.5)
-CFG = SuctionModelConfig()
+CFG = default_config(SuctionModelConfig)
 DOWN = np.array([0.0, 0.0, 1.0])  # gravity, camera looking down
 SIDEWAYS = np.array([0.0, 1.0, 0.0])  # gravity, camera looking horizontally
 Z_AXIS = np.array([0.0, 0.0, 1.0])

@@ -3,9 +3,10 @@
 import numpy as np
 import torch
 
+from conftest import default_config
 from pipeline.dexnet.gqcnn import GQCNN, CropConfig, GQCNNConfig, border_for_window, extract_crops
 
-CFG = CropConfig(window_px=96, size=48, depth_scale=0.05, missing_value=1.0)  # 2:1
+CFG = default_config(CropConfig, window_px=96, size=48, depth_scale=0.05, missing_value=1.0)  # 2:1
 
 
 def _flat(h=200, w=200, z=0.5):

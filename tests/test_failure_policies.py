@@ -3,12 +3,14 @@ and the surface-area safety check, against answers worked out by hand."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
+from conftest import default_config
 from pipeline.camera.geometry import Intrinsics
 from pipeline.labelling.types import GraspClass
 from pipeline.picking.cell import Frame
@@ -21,7 +23,7 @@ D_GROUND = 0.645
 
 def cand(name: str, phi_deg: float, depth: float, prob: float = 0.9) -> GraspCandidate:
     phi = math.radians(phi_deg)
-    score, jd, ji = graspability(depth, phi, D_GROUND)
+    score, jd, ji = graspability(depth, phi, D_GROUND, PAPER.phi_switch)
     c = GraspCandidate(u=0.0, v=0.0, grasp_class=GraspClass.L, probability=prob, score=score,
                        phi=phi, depth=depth, normal_cam=np.zeros(3, np.float32), j_distance=jd,
                        j_inclination=ji)
@@ -33,9 +35,8 @@ def names(cands):
     return [c.name for c in cands]
 
 
-PAPER = RankingConfig(d_ground=D_GROUND)
-TIE = RankingConfig(d_ground=D_GROUND, policy="height_tiebreak",
-                    inclination_tie=math.radians(10))
+PAPER = default_config(RankingConfig, d_ground=D_GROUND, threshold=0.5, policy="paper")
+TIE = dataclasses.replace(PAPER, policy="height_tiebreak", inclination_tie=math.radians(10))
 
 
 def test_fig11_upper_box_goes_first_with_the_tie_break():
@@ -67,14 +68,15 @@ def test_level_best_is_unchanged_and_ties_chain_greedily():
 
 def test_unknown_policy_is_a_clear_error():
     with pytest.raises(ValueError, match="height_tiebreak"):
-        order_candidates([cand("a", 10, 0.5)], RankingConfig(d_ground=D_GROUND, policy="tallest"))
+        order_candidates([cand("a", 10, 0.5)], dataclasses.replace(PAPER, policy="tallest"))
 
 
 def _runner(ratio: float, intr: Intrinsics, cup_diameter: float = 0.030):
     cfg = SimpleNamespace(evaluate=SimpleNamespace(min_area_ratio=ratio, max_candidates_checked=10),
                           hand=SimpleNamespace(cup_diameter=cup_diameter))
     return SimpleNamespace(cfg=cfg, cell=SimpleNamespace(intrinsics=intr),
-                           descriptor_cfg=DescriptorConfig())
+                           descriptor_cfg=default_config(
+                               DescriptorConfig, window_tolerance_depth=0.0, track_normal_deg=0.0))
 
 
 def test_area_check_drops_surfaces_barely_larger_than_the_cup():

@@ -15,6 +15,7 @@ import numpy as np
 import pybullet as p
 import pytest
 
+from conftest import default_config
 from pipeline.camera.geometry import project, world_to_camera
 from pipeline.labelling.types import GraspClass
 
@@ -194,7 +195,7 @@ def test_servo_turns_to_a_reference_axis_by_hand():
     π about Z; wanted at +Y, −π/2 about Z... i.e. atan2(−a_y, a_x) with a = +Y: −π/2."""
     from pipeline.servo.control import ServoConfig, servo_velocity
 
-    args = ([0, 0, 0.3], [0, 0, -1], [1, 0, 0], [0, 1, 0], "B", ServoConfig(), 1 / 30)
+    args = ([0, 0, 0.3], [0, 0, -1], [1, 0, 0], [0, 1, 0], "B", default_config(ServoConfig), 1 / 30)
     assert servo_velocity(*args).error[3:] == pytest.approx([0, 0, 0], abs=1e-12)
     half = servo_velocity(*args, reference_x=[-1, 0, 0]).error[3:]
     assert abs(half[2]) == pytest.approx(np.pi) and half[:2] == pytest.approx([0, 0])

@@ -22,12 +22,13 @@ import numpy as np
 import pybullet as p
 import pytest
 
+from conftest import default_config
 from pipeline.camera.geometry import Intrinsics
 from pipeline.dexnet.contact import REASONS, SuctionModelConfig, evaluate_contacts
 from pipeline.picking import SuctionGripper, hold_test, seal_test
 from pipeline.robot import CUP_OFFSET, Robot, RobotConfig
 
-CFG = SuctionModelConfig()
+CFG = default_config(SuctionModelConfig)
 SIZE = np.array([0.092, 0.145, 0.052])  # world x, y, z edge lengths, m
 VOLUME = float(np.prod(SIZE))  # 6.9368e-4 m^3
 G = np.array([0.0, 0.0, -9.81])
@@ -40,7 +41,7 @@ def world():
     p.setGravity(0, 0, -9.81, physicsClientId=client)
     col = p.createCollisionShape(p.GEOM_BOX, halfExtents=[1.0, 1.0, 0.01], physicsClientId=client)
     ground = p.createMultiBody(0.0, col, basePosition=[0, 0, -0.01], physicsClientId=client)
-    robot = Robot(RobotConfig())
+    robot = Robot(default_config(RobotConfig))
     robot.load(client)
     home = robot.home_q()
     yield client, robot, ground, home

@@ -14,12 +14,15 @@ import numpy as np
 import pytest
 import torch
 
+from conftest import default_config
 from pipeline.labelling.types import GraspClass
-from pipeline.planner import GraspNet, NetworkConfig, encode, focal_terms, grasp_loss, stack_targets
+from pipeline.planner import (GraspNet, LossConfig, NetworkConfig, encode, focal_terms, grasp_loss,
+                              stack_targets)
 
 R, L, B, NG = (int(c) for c in GraspClass)
 POS0 = 0.25 * 0.25 * math.log(2)  # 0.0433217
 NEG0 = 0.75 * 0.25 * math.log(2)  # 0.1299651
+LOSS = default_config(LossConfig)  # train.alpha = 0.25, gamma = 2, both lambdas 1
 
 
 def targets(grid: int, points: dict) -> dict[str, torch.Tensor]:
@@ -61,7 +64,7 @@ def test_focal_terms_stable_for_large_logits():
 
 def test_one_point_on_a_1x1_grid():
     raw = torch.zeros(1, 6, 1, 1)
-    loss = grasp_loss(raw, targets(1, {(0, 0): (B, (0.25, 0.75))}))
+    loss = grasp_loss(raw, targets(1, {(0, 0): (B, (0.25, 0.75))}), LOSS)
     # L_coord = (0.5 − 0.25)² + (0.5 − 0.75)² = 0.125; L_class = 0.0433217 + 3 · 0.1299651.
     assert loss["coord"].item() == pytest.approx(0.125, abs=1e-6)
     assert loss["class"].item() == pytest.approx(0.4332170, abs=1e-6)
@@ -70,7 +73,7 @@ def test_one_point_on_a_1x1_grid():
 
 def test_empty_cells_are_all_negative_2x2():
     raw = torch.zeros(1, 6, 2, 2)
-    loss = grasp_loss(raw, targets(2, {(1, 0): (R, (0.25, 0.75))}))
+    loss = grasp_loss(raw, targets(2, {(1, 0): (R, (0.25, 0.75))}), LOSS)
     # The GT cell as above plus 3 empty cells × 4 negatives: 0.4332170 + 12 · 0.1299651.
     assert loss["class"].item() == pytest.approx(1.9927981, abs=1e-6)
     assert loss["coord"].item() == pytest.approx(0.125, abs=1e-6)  # empty cells add no L_coord
@@ -82,7 +85,7 @@ def test_normalised_by_the_number_of_points():
     raw = torch.zeros(1, 6, 2, 2)
     raw[0, 0, 0, 1] = math.log(3.0)  # cell (0, 1): offset_u = 0.75
     t = targets(2, {(0, 0): (R, (0.25, 0.75)), (0, 1): (NG, (0.75, 0.5))})
-    loss = grasp_loss(raw, t)
+    loss = grasp_loss(raw, t, LOSS)
     # B = 2. L_coord = (0.125 + 0) / 2; L_class = (2 · 0.4332170 + 2 cells · 4 · 0.1299651) / 2.
     assert loss["coord"].item() == pytest.approx(0.0625, abs=1e-6)
     assert loss["class"].item() == pytest.approx(0.9530774, abs=1e-6)
@@ -91,12 +94,12 @@ def test_normalised_by_the_number_of_points():
 def test_no_points_guard_and_batch_mean():
     raw = torch.zeros(2, 6, 2, 2, requires_grad=True)
     empty = targets(2, {})
-    loss = grasp_loss(raw[:1], empty)
+    loss = grasp_loss(raw[:1], empty, LOSS)
     # B = 0 → divided by 1: 16 negatives · 0.1299651 = 3 ln 2 = 2.0794415; no L_coord.
     assert loss["class"].item() == pytest.approx(3 * math.log(2), abs=1e-6)
     assert loss["coord"].item() == 0.0 and loss["num_points"].tolist() == [0]
     # Batch = mean of per-image losses: (2.1177981 + 2.0794415) / 2.
-    batch = grasp_loss(raw, cat(targets(2, {(1, 0): (R, (0.25, 0.75))}), empty))
+    batch = grasp_loss(raw, cat(targets(2, {(1, 0): (R, (0.25, 0.75))}), empty), LOSS)
     assert batch["total"].item() == pytest.approx(2.0986198, abs=1e-6)
     batch["total"].backward()
     assert torch.isfinite(raw.grad).all() and raw.grad.abs().sum() > 0
@@ -104,7 +107,7 @@ def test_no_points_guard_and_batch_mean():
 
 def test_loss_with_network_and_encoded_targets_trains():
     torch.manual_seed(0)
-    net = GraspNet(NetworkConfig(width=1 / 32))
+    net = GraspNet(default_config(NetworkConfig, width=1 / 32))
     depth = torch.rand(2, 1, 416, 416)
     t = stack_targets([
         encode(np.array([[16.0, 16.0], [200.0, 100.0], [300.0, 380.0]]), np.array([B, L, NG])),
@@ -113,7 +116,7 @@ def test_loss_with_network_and_encoded_targets_trains():
     opt = torch.optim.Adam(net.parameters(), lr=1e-2)
     history = []
     for _ in range(8):
-        loss = grasp_loss(net(depth), t)
+        loss = grasp_loss(net(depth), t, LOSS)
         assert all(torch.isfinite(v).all() for v in loss.values())
         opt.zero_grad()
         loss["total"].backward()
@@ -125,4 +128,4 @@ def test_loss_with_network_and_encoded_targets_trains():
 
 def test_grid_mismatch_is_an_error():
     with pytest.raises(ValueError, match="grid"):
-        grasp_loss(torch.zeros(1, 6, 13, 13), targets(2, {}))
+        grasp_loss(torch.zeros(1, 6, 13, 13), targets(2, {}), LOSS)

@@ -9,6 +9,7 @@ import pytest
 import torch
 from torch import nn
 
+from conftest import default_config
 from pipeline.labelling.types import GraspClass
 from pipeline.planner import (
     EMPTY, GraspNet, NetworkConfig, conv_layers, count_flops, count_parameters, decode_output,
@@ -36,18 +37,18 @@ TINY_OUT = (32, 6, 1, 13)  # the linear output conv, with bias
 
 def tiny_net() -> GraspNet:
     torch.manual_seed(0)
-    return GraspNet(NetworkConfig(width=1 / 32))
+    return GraspNet(default_config(NetworkConfig, width=1 / 32))
 
 
 def test_23_conv_layers():
     for width in (1 / 32, 0.25, 1.0):
-        assert len(conv_layers(GraspNet(NetworkConfig(width=width)))) == 23
+        assert len(conv_layers(GraspNet(default_config(NetworkConfig, width=width)))) == 23
 
 
 @pytest.mark.parametrize("width,batch", [(0.25, 2), (1.0, 1)])
 def test_output_shape(width, batch):
     torch.manual_seed(0)
-    net = GraspNet(NetworkConfig(width=width)).eval()
+    net = GraspNet(default_config(NetworkConfig, width=width)).eval()
     with torch.no_grad():
         out = net(torch.rand(batch, 1, 416, 416))
     assert out.shape == (batch, 6, 13, 13)
@@ -91,7 +92,7 @@ def test_parameter_and_mac_counts_by_hand():
 def test_flops_match_measured_output_sizes():
     # count_flops uses each conv's tagged downsampling level; check it against a real forward.
     torch.manual_seed(0)
-    net = GraspNet(NetworkConfig(width=0.25)).eval()
+    net = GraspNet(default_config(NetworkConfig, width=0.25)).eval()
     measured = []
     for conv in conv_layers(net):
         conv.register_forward_hook(lambda m, i, o: measured.append(

@@ -13,12 +13,13 @@ import math
 import numpy as np
 import pytest
 
+from conftest import default_config
 from pipeline.camera.geometry import Intrinsics
 from pipeline.labelling.types import GraspClass
 from pipeline.planner import GraspPrediction, RankingConfig, graspability, rank_grasps
 
 SR300 = Intrinsics(416, 416, 411.7, 411.7, 207.5, 207.5)
-CFG = RankingConfig(d_ground=0.645, threshold=0.5)
+CFG = default_config(RankingConfig, d_ground=0.645, threshold=0.5)
 
 
 def plane(z0: float, tilt_deg: float = 0.0) -> np.ndarray:
@@ -59,7 +60,8 @@ def test_switch_at_30_degrees():
     # 31° ≥ π/6: J_inclination = 1 − 2 · 31 / 180 = 0.655556.
     [c] = rank_grasps([pred(200.0, 210.0)], plane(0.5, 31), SR300, CFG)
     assert c.score == pytest.approx(0.655556, abs=1e-4)
-    assert graspability(0.5, math.pi / 6, 0.645)[0] == pytest.approx(1 - 2 / 6)  # boundary: incl.
+    # boundary: inclination
+    assert graspability(0.5, math.pi / 6, 0.645, CFG.phi_switch)[0] == pytest.approx(1 - 2 / 6)
 
 
 def test_ordering_on_four_bands():

@@ -10,7 +10,7 @@ import pybullet as p
 import pytest
 
 from pipeline.camera.geometry import camera_pose_above_bin
-from conftest import conf_section
+from conftest import conf_section, default_config
 from pipeline.robot import (CUP_DIAMETER, CUP_OFFSET, CUP_TIP_Z, URDF_PATH, Robot, RobotConfig,
                             build_urdf_xml, rotation_angle_deg, target_camera_pose)
 from pipeline.simulation.heap import build_cell
@@ -25,7 +25,7 @@ def cell():
     client = p.connect(p.DIRECT)
     bin_cfg = conf_section("bin")
     bodies = build_cell(client, bin_cfg, conf_section("physics"))
-    robot = Robot(RobotConfig())
+    robot = Robot(default_config(RobotConfig))
     robot.load(client, ground_z=-bin_cfg.floor_thickness)
     yield client, robot, bodies
     p.disconnect(client)

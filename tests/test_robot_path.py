@@ -10,6 +10,7 @@ import numpy as np
 import pybullet as p
 import pytest
 
+from conftest import default_config
 from pipeline.robot.path import PathCheckConfig, check_motion, distance_to_path, substeps
 
 
@@ -54,15 +55,15 @@ def test_every_substep_is_checked_by_hand():
     q = np.array([[0.0, 0.0], [0.3, 0.0], [0.3, 0.3]])
     poses = [_pose([0, 0, 0]), _pose([0.03, 0, 0]), _pose([0.04, 0, 0])]
     robot = _CountingRobot(lambda q: False)
-    res = check_motion(robot, q, poses, PathCheckConfig(), obstacle_ids=[1])
+    res = check_motion(robot, q, poses, default_config(PathCheckConfig), obstacle_ids=[1])
     assert (res.ok, res.index, res.samples) == (True, 2, 4)
     assert np.array([c[0] for c in robot.checked]) == pytest.approx(
         np.array([[0.1, 0], [0.2, 0], [0.3, 0], [0.3, 0.3]]))
     robot = _CountingRobot(lambda q: abs(q[0] - 0.2) < 1e-9)
-    res = check_motion(robot, q, poses, PathCheckConfig(), obstacle_ids=[1])
+    res = check_motion(robot, q, poses, default_config(PathCheckConfig), obstacle_ids=[1])
     assert (res.ok, res.reason, res.index, res.samples) == (False, "collision", 0, 2)
     robot = _CountingRobot(lambda q: False)
-    check_motion(robot, q[:2], poses[:2], PathCheckConfig(bin_clearance=0.002),
+    check_motion(robot, q[:2], poses[:2], default_config(PathCheckConfig, bin_clearance=0.002),
                  obstacle_ids=[1, 2], padded_ids=[2])
     assert [c[1] for c in robot.checked[:2]] == [None, pytest.approx(0.007)]
     assert robot.checked[0][0] == robot.checked[1][0]  # both at the first part's joints
@@ -81,7 +82,7 @@ def _level_face_below_home():
 def robot(client):
     from pipeline.robot.model import Robot, RobotConfig
 
-    r = Robot(RobotConfig())
+    r = Robot(default_config(RobotConfig))
     r.load(client, ground_z=-0.02)
     return r
 
@@ -99,7 +100,7 @@ def test_predicted_servo_straight_down_by_hand(robot):
     home = robot.home_q()
     T0 = robot.camera_pose(home)
     args = (centre, normal, T0[:3, 0], T0[:3, 1], "B")
-    cfg = ServoConfig()
+    cfg = default_config(ServoConfig)
     m = servo_motion(robot, home, *args, [cfg], 1 / 30, 240, 1e-3, 3.14)
     P = np.array([T[:3, 3] for T in m.poses])
     assert m.reason is None and len(m.q) == len(m.poses)
@@ -111,7 +112,7 @@ def test_predicted_servo_straight_down_by_hand(robot):
     assert P[-1, 2] == pytest.approx(0.275, abs=0.0015)
     assert np.all(np.diff(P[:, 2]) < 0)
     assert np.max(np.linalg.norm(np.diff(P, axis=0), axis=1)) <= 0.5 / 30 + 5e-4
-    lifted = ServoConfig(target_point=(0.0, 0.0, 0.30))
+    lifted = default_config(ServoConfig, target_point=(0.0, 0.0, 0.30))
     m = servo_motion(robot, home, *args, [lifted, cfg], 1 / 30, 240, 1e-3, 3.14)
     Z = np.array([T[2, 3] for T in m.poses])
     assert m.reason is None and Z[-1] == pytest.approx(0.275, abs=0.0015)
@@ -132,17 +133,17 @@ def test_a_motion_through_an_obstacle_is_rejected_though_its_end_pose_is_clear(r
     T_home, centre, normal = _level_face_below_home()
     home = robot.home_q()
     T0 = robot.camera_pose(home)
-    m = servo_motion(robot, home, centre, normal, T0[:3, 0], T0[:3, 1], "B", [ServoConfig()],
-                     1 / 30, 240, 1e-3, 3.14)
-    assert check_motion(robot, m.q, m.poses, PathCheckConfig(), []).ok
+    m = servo_motion(robot, home, centre, normal, T0[:3, 0], T0[:3, 1], "B",
+                     [default_config(ServoConfig)], 1 / 30, 240, 1e-3, 3.14)
+    assert check_motion(robot, m.q, m.poses, default_config(PathCheckConfig), []).ok
     col = p.createCollisionShape(p.GEOM_BOX, halfExtents=[0.015] * 3, physicsClientId=client)
     cube = p.createMultiBody(0, col, -1, basePosition=[T0[0, 3], T0[1, 3] + 0.06, 0.40],
                              physicsClientId=client)
     assert robot.in_collision(m.q[-1], [cube]) == []
-    res = check_motion(robot, m.q, m.poses, PathCheckConfig(), [cube])
+    res = check_motion(robot, m.q, m.poses, default_config(PathCheckConfig), [cube])
     assert (res.ok, res.reason) == (False, "collision")
     assert [(c.robot_link, c.other_body) for c in res.collisions] == [("cup_left", cube)]
-    assert check_motion(robot, m.q, m.poses, PathCheckConfig(), [cube], [cube]).ok
+    assert check_motion(robot, m.q, m.poses, default_config(PathCheckConfig), [cube], [cube]).ok
 
 
 def test_distance_to_path_by_hand():

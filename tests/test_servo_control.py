@@ -6,12 +6,14 @@ to the law point towards the camera (project convention).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 import pybullet as p
 import pytest
 
+from conftest import default_config
 from pipeline.robot import Robot, RobotConfig, target_camera_pose
 from pipeline.servo.control import (ServoConfig, clamp_twist, current_features,
                                     interaction_matrix, rotation_error, servo_velocity,
@@ -22,6 +24,7 @@ DT = 1.0 / 30.0
 D_STAR = 0.15
 X_AXIS, Y_AXIS = np.array([1.0, 0, 0]), np.array([0, 1.0, 0])
 FACING = np.array([0, 0, -1.0])  # a fronto-parallel surface's normal, towards the camera
+SERVO = default_config(ServoConfig)  # conf/servo/paper.yaml, d* and cup offset from conf/hand/
 
 
 # ----------------------------------------------------------------------------- so(3) helpers
@@ -54,7 +57,7 @@ def _in_plane(deg):
 
 # ----------------------------------------------------------------------------- features
 def test_target_features_follow_eq_17_18():
-    cfg = ServoConfig()
+    cfg = SERVO
     # p_e* = [0, off/d*, log d*], off = -0.035 (L), 0 (B), +0.035 (R).
     for pattern, off in (("L", -0.035), ("B", 0.0), ("R", 0.035)):
         np.testing.assert_allclose(target_features(pattern, cfg),
@@ -69,13 +72,14 @@ def test_target_features_match_the_target_camera_pose():
     for pattern in "LBR":
         T = target_camera_pose(c, n, X_AXIS, pattern)
         c_t = T[:3, :3].T @ (c - T[:3, 3])
-        np.testing.assert_allclose(current_features(c_t), target_features(pattern), atol=1e-12)
+        np.testing.assert_allclose(current_features(c_t), target_features(pattern, SERVO),
+                                   atol=1e-12)
 
 
 # ----------------------------------------------------------------------------- control law
 @pytest.mark.parametrize("pattern,off", [("L", -0.035), ("B", 0.0), ("R", 0.035)])
 def test_zero_velocity_at_the_target(pattern, off):
-    cmd = servo_velocity([0, off, D_STAR], FACING, X_AXIS, Y_AXIS, pattern, ServoConfig(), DT)
+    cmd = servo_velocity([0, off, D_STAR], FACING, X_AXIS, Y_AXIS, pattern, SERVO, DT)
     np.testing.assert_allclose(cmd.error, 0, atol=1e-12)
     np.testing.assert_allclose(cmd.velocity, 0, atol=1e-12)
     assert cmd.converged
@@ -86,7 +90,7 @@ def test_lateral_offset_moves_the_camera_towards_the_centre():
     # e = [0.1333, 0, 0, 0, 0, 0]. With L_v⁻¹ = [[-1, 0, -x], [0, -1, -y], [0, 0, -1]]:
     # V = -λ' Z L_v⁻¹ e_p = -λ' 0.15 [-0.1333, 0, 0] = [λ' 0.02, 0, 0] = X λ',
     # λ' = 0.4 / (1/30) = 12 per second → V = (0.24, 0, 0) m/s, Ω = 0 (under the speed limits).
-    cmd = servo_velocity([0.02, 0, D_STAR], FACING, X_AXIS, Y_AXIS, "B", ServoConfig(), DT)
+    cmd = servo_velocity([0.02, 0, D_STAR], FACING, X_AXIS, Y_AXIS, "B", SERVO, DT)
     np.testing.assert_allclose(cmd.velocity, [0.24, 0, 0, 0, 0, 0], atol=1e-12)
     assert cmd.velocity[0] > 0 and not cmd.converged
     assert cmd.scale == 1.0
@@ -95,7 +99,7 @@ def test_lateral_offset_moves_the_camera_towards_the_centre():
 def test_far_centre_moves_the_camera_forward():
     # Centre (0, 0, 0.30), B: e = [0, 0, log 2, 0, 0, 0]; V = -λ Z L_v⁻¹ e_p = (0, 0, λ 0.3 log 2).
     # Continuous gain λ = 0.4/s: V_z = 0.4 · 0.3 · 0.6931 = 0.08318 m/s.
-    cfg = ServoConfig(gain_per_step=False)
+    cfg = dataclasses.replace(SERVO, gain_per_step=False)
     cmd = servo_velocity([0, 0, 0.30], FACING, X_AXIS, Y_AXIS, "B", cfg)
     np.testing.assert_allclose(cmd.velocity, [0, 0, 0.4 * 0.3 * math.log(2), 0, 0, 0],
                                atol=1e-12)
@@ -110,7 +114,7 @@ def test_rotation_is_compensated_by_translation():
     # which V_x = -λαZ cancels.
     a = math.radians(10)
     n_towards = -np.array([math.sin(a), 0, math.cos(a)])
-    cfg = ServoConfig(gain_per_step=False)
+    cfg = dataclasses.replace(SERVO, gain_per_step=False)
     cmd = servo_velocity([0, 0, D_STAR], n_towards, X_AXIS, Y_AXIS, "B", cfg)
     np.testing.assert_allclose(cmd.velocity, [-0.4 * D_STAR * a, 0, 0, 0, 0.4 * a, 0],
                                atol=1e-12)
@@ -118,9 +122,9 @@ def test_rotation_is_compensated_by_translation():
 
 def test_gain_per_step_needs_dt():
     with pytest.raises(ValueError):
-        servo_velocity([0, 0, 0.2], FACING, X_AXIS, Y_AXIS, "B", ServoConfig())
+        servo_velocity([0, 0, 0.2], FACING, X_AXIS, Y_AXIS, "B", SERVO)
     with pytest.raises(ValueError):
-        servo_velocity([0, 0, 0.2], FACING, X_AXIS, Y_AXIS, "NG", ServoConfig(), DT)
+        servo_velocity([0, 0, 0.2], FACING, X_AXIS, Y_AXIS, "NG", SERVO, DT)
 
 
 # ----------------------------------------------------------------------------- u theta
@@ -178,7 +182,7 @@ def test_interaction_matrix_and_its_inverse_at_the_centre():
     # M = [[-I/d*, L_w], [0, I]] and M⁻¹ = [[-d* I, d* L_w], [0, I]]
     # (check: (-I/d*)(d* L_w) + L_w = 0).
     L_w = np.array([[0, -1.0, 0], [1, 0, 0], [0, 0, 0]])
-    M = interaction_matrix([0, 0, math.log(D_STAR)], D_STAR, ServoConfig())
+    M = interaction_matrix([0, 0, math.log(D_STAR)], D_STAR, SERVO)
     M_expected = np.block([[-np.eye(3) / D_STAR, L_w], [np.zeros((3, 3)), np.eye(3)]])
     np.testing.assert_allclose(M, M_expected, atol=1e-12)
     M_inv = np.block([[-D_STAR * np.eye(3), D_STAR * L_w], [np.zeros((3, 3)), np.eye(3)]])
@@ -186,7 +190,7 @@ def test_interaction_matrix_and_its_inverse_at_the_centre():
 
 
 def test_speed_clamp_keeps_the_direction():
-    cfg = ServoConfig()
+    cfg = SERVO
     # Centre (0, 0, 0.30), B, per-step gain: V_z = 12 · 0.3 · log 2 = 2.495 m/s > 0.5.
     cmd = servo_velocity([0, 0, 0.30], FACING, X_AXIS, Y_AXIS, "B", cfg, DT)
     assert cmd.raw_velocity[2] == pytest.approx(12 * 0.3 * math.log(2))
@@ -198,7 +202,7 @@ def test_speed_clamp_keeps_the_direction():
     np.testing.assert_allclose(out, twist * s)
     assert s == pytest.approx(min(0.5 / np.linalg.norm(twist[:3]), 1.5 / np.linalg.norm(twist[3:])))
     # Separate clamp: each part at its limit, each keeping its direction.
-    out, _ = clamp_twist(twist, ServoConfig(uniform_clamp=False))
+    out, _ = clamp_twist(twist, dataclasses.replace(SERVO, uniform_clamp=False))
     assert np.linalg.norm(out[:3]) == pytest.approx(0.5)
     assert np.linalg.norm(out[3:]) == pytest.approx(1.5)
     np.testing.assert_allclose(np.cross(out[:3], twist[:3]), 0, atol=1e-12)
@@ -209,7 +213,7 @@ def test_speed_clamp_keeps_the_direction():
 # ----------------------------------------------------------------------------- closed loop
 def test_kinematic_camera_converges():
     """A free-flying camera integrating the commanded twist reaches the L target pose."""
-    cfg = ServoConfig()
+    cfg = SERVO
     c_w = np.array([0.05, -0.02, 0.1])  # surface centre, world
     n_w = np.array([0.0, 0.0, 1.0])  # surface normal towards the camera (facing up)
     long_w = np.array([math.cos(0.4), math.sin(0.4), 0.0])
@@ -248,7 +252,7 @@ def test_kinematic_camera_converges():
 @pytest.fixture(scope="module")
 def robot():
     client = p.connect(p.DIRECT)
-    r = Robot(RobotConfig())
+    r = Robot(default_config(RobotConfig))
     r.load(client)
     yield r
     p.disconnect(client)

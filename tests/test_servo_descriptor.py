@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from omegaconf import OmegaConf
 
+from conftest import default_config
 from pipeline.camera.geometry import Intrinsics, project
 from pipeline.camera.sensor import apply_sensor_model
 from pipeline.servo.descriptor import DescriptorConfig, describe_surface
@@ -23,6 +24,13 @@ SENSOR_SR300_YAML = Path(__file__).resolve().parents[1] / "conf" / "sensor" / "s
 FLOOR_Z = 0.6
 C25, S25 = np.cos(np.radians(25)), np.sin(np.radians(25))
 C20, S20 = np.cos(np.radians(20)), np.sin(np.radians(20))
+
+
+def descriptor(**overrides) -> DescriptorConfig:
+    """``conf/servo/``'s descriptor with the window-depth tolerance and the normal tracking off
+    (0, as the paper) unless ``overrides`` set them: each test turns on what it tests."""
+    off = {"window_tolerance_depth": 0.0, "track_normal_deg": 0.0}
+    return default_config(DescriptorConfig, **{**off, **overrides})
 
 
 def rect(center, axis_a, axis_b, half_a, half_b):
@@ -75,7 +83,7 @@ def test_tilted_rectangle_normal_centre_axes_lengths():
     g_true = np.array([232.202, 191.032])
     np.testing.assert_allclose(project(centre, SR300), g_true, atol=1e-3)
     seed = (g_true[0] + 40, g_true[1] + 20)  # off-centre: g' is refined to the centre
-    f, reason = describe_surface(depth, SR300, seed, DescriptorConfig())
+    f, reason = describe_surface(depth, SR300, seed, descriptor())
     assert reason == "" and f is not None
     n_true = np.array([0.0, S25, -C25])
     assert np.degrees(np.arccos(np.clip(f.normal_cam @ n_true, -1, 1))) < 0.5  # signed: towards
@@ -98,7 +106,7 @@ def test_tilted_rectangle_normal_centre_axes_lengths():
         assert w[2] == 0.0 and np.linalg.norm(w) == pytest.approx(1.0, abs=1e-12)
     # The paper's settings only (plain window SVD, no rim, no refit; 8-connected): same plane,
     # same centre; the region loses its one-pixel rim, so the lengths are ~2 px (2.5 mm) shorter.
-    paper = DescriptorConfig(window_hypotheses=0, window_refits=0, rim=0, refine=False,
+    paper = descriptor(window_hypotheses=0, window_refits=0, rim=0, refine=False,
                              connectivity=8)
     fp, _ = describe_surface(depth, SR300, seed, paper)
     assert np.degrees(np.arccos(np.clip(fp.normal_cam @ n_true, -1, 1))) < 0.5
@@ -113,7 +121,7 @@ def test_plane_filling_the_image():
     # come back through the rim, so the region is all 416 × 416 = 173056 pixels.
     depth, _ = render([rect([0, 0, 0.5], [1, 0, 0], [0, C25, S25], 1.0, 1.0)], floor_z=None)
     assert depth.min() > 0
-    f, reason = describe_surface(depth, SR300, (300, 100))
+    f, reason = describe_surface(depth, SR300, (300, 100), descriptor())
     assert reason == "" and f.num_pixels == 416 * 416
     assert np.degrees(np.arccos(np.clip(f.normal_cam @ [0, S25, -C25], -1, 1))) < 0.01
     # The image's footprint is symmetric about the plane's x = 0 line, so the centre projects
@@ -136,8 +144,8 @@ def test_noisy_depth_needs_normal_smoothing():
     ideal, hits = render([rect(centre, [1, 0, 0], [0, C25, S25], 0.10, 0.06)])
     depth = apply_sensor_model(ideal, sr300, np.random.default_rng(0), SR300)
     seed = (272, 211)
-    assert describe_surface(depth, SR300, seed) == (None, "region_too_small")
-    f, reason = describe_surface(depth, SR300, seed, DescriptorConfig(normal_smoothing=2))
+    assert describe_surface(depth, SR300, seed, descriptor()) == (None, "region_too_small")
+    f, reason = describe_surface(depth, SR300, seed, descriptor(normal_smoothing=2))
     assert reason == ""
     assert np.degrees(np.arccos(np.clip(f.normal_cam @ [0, S25, -C25], -1, 1))) < 0.5
     assert np.linalg.norm(f.center_px - project(centre, SR300)) < 1.0
@@ -148,7 +156,7 @@ def test_noisy_depth_needs_normal_smoothing():
 def test_region_stops_at_depth_step_between_touching_boxes():
     depth, hits = render([BOX_A, BOX_B_STEP])
     assert hits[0].sum() == A_PIXELS
-    f, reason = describe_surface(depth, SR300, (160, 200))
+    f, reason = describe_surface(depth, SR300, (160, 200), descriptor())
     assert reason == ""
     # Every pixel of A and nothing else: the step (2 cm ≫ ε1 = 4 mm) fails Eq. 12; A's own rim
     # pixels (their Eq. 14 stencil reaches over the step) come back through the rim rule.
@@ -166,7 +174,7 @@ def test_region_stops_at_depth_step_between_touching_boxes():
 
     # The paper's rules alone (rim = 0) lose A's one-pixel rim: the top and bottom rows and the
     # left column border the floor (10 cm lower), the right column borders B: 80 × 80 = 6400.
-    f0, _ = describe_surface(depth, SR300, (160, 200), DescriptorConfig(rim=0))
+    f0, _ = describe_surface(depth, SR300, (160, 200), descriptor(rim=0))
     assert f0.num_pixels == 80 * 80
     assert np.linalg.norm(f0.center_px - [166.33, 207.5]) < 1.0
 
@@ -175,7 +183,7 @@ def test_seed_on_edge_takes_nearest_region():
     depth, hits = render([BOX_A, BOX_B_STEP])
     # u = 207 is A's last column: its Eq. 14 normal straddles the step, so the seed pixel fails
     # Eq. 13; the nearest rule pixel (u = 206) is in A's region.
-    f, reason = describe_surface(depth, SR300, (207, 200))
+    f, reason = describe_surface(depth, SR300, (207, 200), descriptor())
     assert reason == ""
     np.testing.assert_array_equal(f.region, hits[0])
 
@@ -187,7 +195,7 @@ def test_seed_on_depth_spike():
     # A's plane and come back through the rim): 6724 − 1 pixels.
     depth, hits = render([BOX_A, BOX_B_STEP])
     depth[200, 160] = 0.49
-    f, reason = describe_surface(depth, SR300, (160, 200))
+    f, reason = describe_surface(depth, SR300, (160, 200), descriptor())
     assert reason == "" and f.num_pixels == A_PIXELS - 1
     assert not f.region[200, 160]
     np.testing.assert_allclose(f.normal_cam, [0, 0, -1], atol=1e-6)
@@ -199,7 +207,7 @@ def test_region_stops_at_crease_between_level_and_tilted_box():
     box_b = rect([0.05 * C20, 0.0, 0.5 + 0.05 * S20], [C20, 0, S20], [0, 1, 0], 0.05, 0.05)
     depth, hits = render([BOX_A, box_b])
     assert hits[0].sum() == A_PIXELS
-    f, reason = describe_surface(depth, SR300, (160, 200))
+    f, reason = describe_surface(depth, SR300, (160, 200), descriptor())
     assert reason == ""
     assert np.all(f.region[hits[0]])  # all of A
     # Beyond A, at most two of B's columns (u = 208, 209): u = 208's stencil straddles the crease
@@ -211,30 +219,30 @@ def test_region_stops_at_crease_between_level_and_tilted_box():
     assert angle_deg(f.normal_cam, [0, 0, 1]) < 0.5
     assert np.linalg.norm(f.center_px - [166.33, 207.5]) < 1.5
     # Seeded on B instead: B's region, B's normal.
-    f_b, _ = describe_surface(depth, SR300, (260, 200))
+    f_b, _ = describe_surface(depth, SR300, (260, 200), descriptor())
     assert not f_b.region[:, :206].any()
     assert np.degrees(np.arccos(f_b.normal_cam @ [S20, 0, -C20])) < 0.5
 
 
 def test_failures_have_reasons():
     depth, _ = render([BOX_A, BOX_B_STEP])
-    assert describe_surface(depth, SR300, (500, 10)) == (None, "seed_outside_image")
+    assert describe_surface(depth, SR300, (500, 10), descriptor()) == (None, "seed_outside_image")
     holed = depth.copy()
     holed[195:206, 155:166] = 0.0
-    assert describe_surface(holed, SR300, (160, 200)) == (None, "no_depth_at_seed")
+    assert describe_surface(holed, SR300, (160, 200), descriptor()) == (None, "no_depth_at_seed")
     # Region of 6724 pixels < min_pixels.
-    assert describe_surface(depth, SR300, (160, 200), DescriptorConfig(min_pixels=7000)) == (
+    assert describe_surface(depth, SR300, (160, 200), descriptor(min_pixels=7000)) == (
         None, "region_too_small")
     # A 6 × 6-pixel patch in an image without data elsewhere: the window holds its 36 points
     # (≥ 10), so the plane is fitted; n_p exists only at the inner 4 × 4, the rim brings back
     # the rest: 36 pixels < 50.
     patch = np.zeros_like(depth)
     patch[100:106, 100:106] = 0.5
-    assert describe_surface(patch, SR300, (102, 102)) == (None, "region_too_small")
+    assert describe_surface(patch, SR300, (102, 102), descriptor()) == (None, "region_too_small")
     # 3 × 3 = 9 window points < 10.
     patch[:] = 0.0
     patch[100:103, 100:103] = 0.5
-    assert describe_surface(patch, SR300, (101, 101)) == (None, "too_few_window_points")
+    assert describe_surface(patch, SR300, (101, 101), descriptor()) == (None, "too_few_window_points")
 
 
 def _step_image():
@@ -252,11 +260,11 @@ def test_seed_near_a_face_edge_over_a_13cm_step_keeps_its_face():
     """Seeds 1–3 px inside the face's edge: the 21 × 21 window holds face and floor, and the
     descriptor still returns the face: normal (0, 0, −1), region = the face's 100 × 100 px
     (area 100² px × (0.5/411.7 m)² = 0.01475 m²), centre (199.5, 199.5)."""
-    from pipeline.servo.descriptor import DescriptorConfig, describe_surface
+    from pipeline.servo.descriptor import describe_surface
 
     depth, intr = _step_image()
     for seed in ((151, 199), (152, 199), (153, 199), (248, 200), (200, 248)):
-        feats, reason = describe_surface(depth, intr, seed, DescriptorConfig())
+        feats, reason = describe_surface(depth, intr, seed, descriptor())
         assert feats is not None, (seed, reason)
         assert feats.normal_cam == pytest.approx([0, 0, -1], abs=1e-3)
         assert feats.center_px == pytest.approx([199.5, 199.5], abs=0.5)
@@ -268,11 +276,11 @@ def test_a_one_pixel_outlier_at_the_seed_keeps_the_face():
     and 13 (its own Eq. 14 normal is exact) while its four neighbours fail Eq. 13, so it is a
     component of one pixel; the region is the face around it (the paper's rule alone gives
     "region_too_small")."""
-    from pipeline.servo.descriptor import DescriptorConfig, describe_surface
+    from pipeline.servo.descriptor import describe_surface
 
     depth, intr = _step_image()
     depth[200, 200] = 0.5006
-    feats, reason = describe_surface(depth, intr, (200, 200), DescriptorConfig())
+    feats, reason = describe_surface(depth, intr, (200, 200), descriptor())
     assert feats is not None, reason
     assert feats.area == pytest.approx(100 ** 2 * (0.5 / 411.7) ** 2, rel=0.03)
 
@@ -290,10 +298,10 @@ def test_window_tolerance_shrinks_with_depth_close_to_the_face():
     v, u = np.mgrid[0:416, 0:416]
     corner = (v >= 122) & (u >= 209)
     depth[corner] = (0.1585 + 0.0023 * (v - 122))[corner]
-    feats, reason = describe_surface(depth, intr, (208, 121), DescriptorConfig())
+    feats, reason = describe_surface(depth, intr, (208, 121), descriptor())
     assert feats is None and reason == "region_too_small"  # the paper's fixed ε1
     feats, reason = describe_surface(depth, intr, (208, 121),
-                                     DescriptorConfig(window_tolerance_depth=0.6))
+                                     descriptor(window_tolerance_depth=0.6))
     assert feats is not None, reason
     assert feats.normal_cam == pytest.approx([0, 0, -1], abs=1e-3)
 
@@ -306,7 +314,7 @@ def test_a_seed_on_a_one_pixel_crack_keeps_the_face_around_it():
     alone gives "no_region_at_seed".)"""
     depth, intr = _step_image()
     depth[150:250, 200] = 0.52
-    feats, reason = describe_surface(depth, intr, (200, 200), DescriptorConfig())
+    feats, reason = describe_surface(depth, intr, (200, 200), descriptor())
     assert feats is not None, reason
     assert feats.normal_cam == pytest.approx([0, 0, -1], abs=1e-3)
     assert feats.center_px == pytest.approx([174.5, 199.5], abs=0.5)
@@ -324,10 +332,10 @@ def test_a_tracked_seed_that_slid_onto_the_next_face_keeps_the_tracked_face():
     box_b = rect([0.05 * c45, 0.0, 0.5 + 0.05 * s45], [c45, 0, s45], [0, 1, 0], 0.05, 0.05)
     depth, hits = render([BOX_A, box_b])
     seed = (215, 200)
-    f, _ = describe_surface(depth, SR300, seed)
+    f, _ = describe_surface(depth, SR300, seed, descriptor())
     # B, and of A at most the rim's two columns (as at the 20° crease above)
     assert angle_deg(f.normal_cam, [s45, 0, -c45]) < 0.5 and f.region[hits[0]].sum() <= 2 * 82
-    cfg = DescriptorConfig(track_normal_deg=20.0)
+    cfg = descriptor(track_normal_deg=20.0)
     f, reason = describe_surface(depth, SR300, seed, cfg, expected_normal_cam=[0, 0, -1])
     assert reason == "" and angle_deg(f.normal_cam, [0, 0, 1]) < 0.5
     assert np.all(f.region[hits[0]])
@@ -336,13 +344,13 @@ def test_a_tracked_seed_that_slid_onto_the_next_face_keeps_the_tracked_face():
     # than a tracking tolerance of 10°: "surface_changed". 50° off: nothing grows at all.
     t = np.radians(12)
     off = np.array([np.sin(t), 0.0, -np.cos(t)])
-    assert describe_surface(depth, SR300, seed, DescriptorConfig(track_normal_deg=10.0),
+    assert describe_surface(depth, SR300, seed, descriptor(track_normal_deg=10.0),
                             expected_normal_cam=off) == (None, "surface_changed")
     t = np.radians(50)
     assert describe_surface(depth, SR300, seed, cfg, expected_normal_cam=[
         0, np.sin(t), -np.cos(t)]) == (None, "no_region_at_seed")
     # tracking off (the paper): the expected normal is ignored
-    f, _ = describe_surface(depth, SR300, seed, DescriptorConfig(), expected_normal_cam=[0, 0, -1])
+    f, _ = describe_surface(depth, SR300, seed, descriptor(), expected_normal_cam=[0, 0, -1])
     assert angle_deg(f.normal_cam, [s45, 0, -c45]) < 0.5
 
 
@@ -369,11 +377,11 @@ def test_two_coplanar_faces_side_by_side_split_at_their_seam():
     depth, _ = render([BOX_A, box_b])
     centre_a = np.array([-0.05, 0.0, 0.50])
     seed = project(centre_a, SR300)
-    whole, reason = describe_surface(depth, SR300, seed)
+    whole, reason = describe_surface(depth, SR300, seed, descriptor())
     assert reason == ""
     assert abs(whole.center_cam[0]) < 0.002 and whole.long_length == pytest.approx(0.2, abs=0.003)
     sites = np.array([centre_a, [0.05, 0.0, 0.50]])
-    part, reason = describe_surface(depth, SR300, seed, sites_cam=sites)
+    part, reason = describe_surface(depth, SR300, seed, descriptor(), sites_cam=sites)
     assert reason == ""
     np.testing.assert_allclose(part.center_cam, centre_a, atol=0.0015)
     assert part.long_length == pytest.approx(0.10, abs=0.003)
@@ -381,5 +389,5 @@ def test_two_coplanar_faces_side_by_side_split_at_their_seam():
     assert abs(part.num_pixels - A_PIXELS) <= 82
     assert not part.region[:, 208:].any()  # nothing of B's side of the seam
     # one site only (or none) is the whole region
-    one, _ = describe_surface(depth, SR300, seed, sites_cam=sites[:1])
+    one, _ = describe_surface(depth, SR300, seed, descriptor(), sites_cam=sites[:1])
     assert one.num_pixels == whole.num_pixels

@@ -6,6 +6,7 @@ Camera: 0.625 m above the bin floor looking straight down, fx = fy = 411.7 px, p
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from types import SimpleNamespace as NS
 
@@ -14,6 +15,7 @@ import pybullet as p
 import pytest
 from omegaconf import OmegaConf
 
+from conftest import default_config
 from pipeline.camera.geometry import Intrinsics, camera_pose_above_bin, pose_matrix, project
 from pipeline.camera.render import render_depth
 from pipeline.cli import compose
@@ -32,6 +34,7 @@ BIN = NS(inner_length_x=0.40, inner_width_y=0.30, wall_height=0.15, wall_thickne
          floor_thickness=0.02, lateral_friction=0.5)
 PHYS = NS(gravity=-9.81, time_step=1 / 240, solver_iterations=50, friction_anchor=True)
 FLAT = (0.12, 0.075, 0.023)
+SURFACES = default_config(SurfaceDetectionConfig)  # conf/surfaces/ransac.yaml
 
 
 @pytest.fixture(scope="module")
@@ -72,7 +75,7 @@ def test_flat_box_rotated_30deg(client):
     (the camera axis passes through its footprint, so no side face faces the camera)."""
     quat = p.getQuaternionFromEuler([0, 0, np.deg2rad(30)])
     depth, mask, box = _render_box(client, FLAT, [0.03, -0.02, 0.0115], quat)
-    surfaces = detect_surfaces(depth, mask, SR300)
+    surfaces = detect_surfaces(depth, mask, SR300, SURFACES)
     assert len(surfaces) == 1
     s = surfaces[0]
     assert s.instance == 1
@@ -118,7 +121,7 @@ def test_box_tilted_35deg_shows_two_faces(client):
     """
     quat = p.getQuaternionFromEuler([np.deg2rad(35), 0, 0])
     depth, mask, box = _render_box(client, FLAT, [0.03, -0.02, 0.06], quat)
-    surfaces = detect_surfaces(depth, mask, SR300)
+    surfaces = detect_surfaces(depth, mask, SR300, SURFACES)
     assert len(surfaces) == 2
     truth = true_visible_faces(depth, mask, SR300, [box], min_visible_px=200)
     assert sorted(t.extra["face"] for t in truth) == ["+y", "+z"]
@@ -147,13 +150,14 @@ def test_open3d_backend_finds_the_same_planes(client):
     least-squares refinement, at the same two faces as the default numpy RANSAC."""
     quat = p.getQuaternionFromEuler([np.deg2rad(35), 0, 0])
     depth, mask, _ = _render_box(client, FLAT, [0.03, -0.02, 0.06], quat)
-    ours = detect_surfaces(depth, mask, SR300)
-    theirs = detect_surfaces(depth, mask, SR300, SurfaceDetectionConfig(ransac_backend="open3d"))
+    ours = detect_surfaces(depth, mask, SR300, SURFACES)
+    open3d = dataclasses.replace(SURFACES, ransac_backend="open3d")
+    theirs = detect_surfaces(depth, mask, SR300, open3d)
     assert [s.num_points for s in theirs] == [s.num_points for s in ours]
     for s, t in zip(ours, theirs):
         assert np.linalg.norm(s.center_cam - t.center_cam) < 1e-5
     with pytest.raises(ValueError, match="ransac_backend"):
-        detect_surfaces(depth, mask, SR300, SurfaceDetectionConfig(ransac_backend="pcl"))
+        detect_surfaces(depth, mask, SR300, dataclasses.replace(SURFACES, ransac_backend="pcl"))
 
 
 def test_occluded_face_keeps_largest_region(client):
@@ -168,7 +172,7 @@ def test_occluded_face_keeps_largest_region(client):
     """
     depth, mask, box = _render_box(client, FLAT, [0.03, -0.02, 0.0115], (0, 0, 0, 1),
                                    occluders=[((0.01, 0.2, 0.01), [0.065, -0.02, 0.05])])
-    surfaces = detect_surfaces(depth, mask, SR300)
+    surfaces = detect_surfaces(depth, mask, SR300, SURFACES)
     assert len(surfaces) == 1
     s = surfaces[0]
     assert s.extra["regions"] == 2
@@ -182,18 +186,18 @@ def test_occluded_face_keeps_largest_region(client):
 def test_degenerate_inputs():
     empty_mask = np.zeros((416, 416), np.uint8)
     depth = np.full((416, 416), 0.6, np.float32)
-    assert detect_surfaces(depth, empty_mask, SR300) == []
+    assert detect_surfaces(depth, empty_mask, SR300, SURFACES) == []
     assert true_visible_faces(depth, empty_mask, SR300, [], 200) == []
     # A mask but no depth data.
     mask = np.zeros((416, 416), np.uint8)
     mask[100:200, 100:200] = 1
-    assert detect_surfaces(np.zeros((416, 416), np.float32), mask, SR300) == []
+    assert detect_surfaces(np.zeros((416, 416), np.float32), mask, SR300, SURFACES) == []
     # Fewer pixels than min_inliers.
     tiny = np.zeros((416, 416), np.uint8)
     tiny[10:15, 10:15] = 1
-    assert detect_surfaces(depth, tiny, SR300) == []
+    assert detect_surfaces(depth, tiny, SR300, SURFACES) == []
     with pytest.raises(ValueError, match="intrinsics"):
-        detect_surfaces(depth[:10], mask[:10], SR300)
+        detect_surfaces(depth[:10], mask[:10], SR300, SURFACES)
 
 
 def test_fronto_parallel_square_by_hand():
@@ -208,7 +212,7 @@ def test_fronto_parallel_square_by_hand():
     mask = np.zeros((416, 416), np.uint8)
     depth[180:241, 150:251] = 0.5
     mask[180:241, 150:251] = 7
-    (s,) = detect_surfaces(depth, mask, SR300)
+    (s,) = detect_surfaces(depth, mask, SR300, SURFACES)
     assert s.instance == 7 and s.num_points == 101 * 61
     assert s.center_cam == pytest.approx([-0.009109, 0.003036, 0.5], abs=1e-6)
     assert s.center_px == pytest.approx([200.0, 210.0], abs=1e-3)
@@ -277,7 +281,7 @@ def smoke_scenes(client):
 def test_simulated_heaps_match_truth(smoke_scenes):
     matches, big_missed, num_big = [], [], 0
     for depth, mask, boxes, intr in smoke_scenes:
-        detected = detect_surfaces(depth, mask, intr)
+        detected = detect_surfaces(depth, mask, intr, SURFACES)
         truth = true_visible_faces(depth, mask, intr, boxes, min_visible_px=200)
         m = match_surfaces(detected, truth)
         matches.append(m)
@@ -295,8 +299,8 @@ def test_simulated_heaps_match_truth(smoke_scenes):
 
 def test_deterministic(smoke_scenes):
     depth, mask, _, intr = smoke_scenes[0]
-    a = detect_surfaces(depth, mask, intr)
-    b = detect_surfaces(depth, mask, intr, SurfaceDetectionConfig())
+    a = detect_surfaces(depth, mask, intr, SURFACES)
+    b = detect_surfaces(depth, mask, intr, default_config(SurfaceDetectionConfig))
     assert len(a) == len(b) > 0
     for s, t in zip(a, b):
         for name in ("center_cam", "normal_cam", "long_axis_cam", "short_axis_cam", "center_px"):
@@ -309,7 +313,7 @@ def test_deterministic(smoke_scenes):
     # drawn (and on the rounding of the CPU's vectorised sums): an edge pixel between two faces
     # may go to either. So neither the order within a box nor the exact counts are compared;
     # the counts agree within 3 % (a 250-pixel face's edge is about 60 pixels).
-    c = detect_surfaces(depth, mask, intr, SurfaceDetectionConfig(seed=5))
+    c = detect_surfaces(depth, mask, intr, dataclasses.replace(SURFACES, seed=5))
     assert len(c) == len(a) and [s.instance for s in c] == [s.instance for s in a]
     unmatched = set(range(len(c)))
     for s in a:

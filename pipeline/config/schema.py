@@ -241,6 +241,18 @@ class ModelConfig:
 
 
 @dataclass
+class RankingSchema:
+    """The ranking stored with the model (``pipeline.planner.ranking.RankingConfig`` documents
+    each field; its angles here in degrees)."""
+
+    phi_switch_deg: float = MISSING  # Eq. 7: J_inclination from this inclination on
+    normal_half_window: int = MISSING  # h: the normal is averaged over (2h + 1)^2 pixels
+    max_depth_jump: float = MISSING  # m: a larger depth step to a neighbour is an object edge
+    policy: str = MISSING  # "paper" | "height_tiebreak"
+    inclination_tie_deg: float = MISSING  # height_tiebreak: inclinations closer than this tie
+
+
+@dataclass
 class TrainConfig:
     """The training stage (``pipeline.train``) and what it stores for the planner."""
 
@@ -262,6 +274,7 @@ class TrainConfig:
     threshold: Optional[float] = MISSING  # th of Eq. 3; None: calibrated on val (planner.calibration)
     threshold_grid: List[float] = MISSING  # th values calibration scores (conf)
     match_radius_px: float = MISSING  # Table 1: a prediction within this of a same-class truth
+    ranking: RankingSchema = MISSING  # Eqs. 7-10 (``pipeline.planner.ranking.RankingConfig``)
     num_threads: int = MISSING  # torch CPU threads (fixed: results depend on it); split among DDP ranks
     loader_workers: int = MISSING  # processes decoding batches (0 = the training process); result-neutral
     device: str = MISSING  # "auto" (CUDA when available) | "cpu" | "cuda"

@@ -24,7 +24,8 @@ from pipeline.dexnet.sampling import (
 
 @dataclass
 class CEMConfig:
-    """gqcnn ``CrossEntropyRobustGraspingPolicy`` parameters (Dex-Net 4.0 suction config).
+    """gqcnn ``CrossEntropyRobustGraspingPolicy`` parameters (Dex-Net 4.0 suction config):
+    ``conf/dexnet/``, built by ``pipeline.dexnet.planner.cem_config``.
 
     Attributes:
         num_seed_samples: candidates drawn by the sampler to start (Dex-Net 3.0 used 250).
@@ -38,13 +39,13 @@ class CEMConfig:
             collect ``num_gmm_samples`` acceptable candidates.
     """
 
-    num_seed_samples: int = 200
-    num_gmm_samples: int = 50
-    num_iters: int = 3
-    gmm_refit_p: float = 0.25
-    gmm_component_frac: float = 0.4
-    gmm_reg_covar: float = 0.01
-    max_resamples: int = 100
+    num_seed_samples: int
+    num_gmm_samples: int
+    num_iters: int
+    gmm_refit_p: float
+    gmm_component_frac: float
+    gmm_reg_covar: float
+    max_resamples: int
 
 
 @dataclass
@@ -89,7 +90,7 @@ def _score(score_fn: Callable[[Candidates], np.ndarray], cands: Candidates) -> n
 
 
 def cross_entropy_method(cloud: PointCloudImage, score_fn: Callable[[Candidates], np.ndarray],
-                         cfg: CEMConfig | None = None, sampler_cfg: SamplerConfig | None = None,
+                         cfg: CEMConfig, sampler_cfg: SamplerConfig,
                          rng: np.random.Generator | None = None) -> CEMResult:
     """Pick the best suction candidate with gqcnn's cross-entropy method.
 
@@ -105,7 +106,8 @@ def cross_entropy_method(cloud: PointCloudImage, score_fn: Callable[[Candidates]
        dropped). The collected set replaces the current one.
     3. Score the final set and return its argmax (first one on ties).
 
-    Sizes with the defaults: 200 scored -> 50 elites -> 50 -> 13 -> 50 -> 13 -> final 50.
+    Sizes with conf/dexnet/dexnet4.yaml's values: 200 scored -> 50 elites -> 50 -> 13 -> 50 -> 13
+    -> final 50.
 
     Randomness: everything comes from ``rng``. Each mixture gets
     ``random_state = np.random.RandomState(s)`` with an int ``s`` drawn from ``rng``: a
@@ -124,16 +126,13 @@ def cross_entropy_method(cloud: PointCloudImage, score_fn: Callable[[Candidates]
     Args:
         cloud: the depth image's :class:`PointCloudImage` (its ``valid`` carries the object mask).
         score_fn: maps N :class:`Candidates` to (N,) scores, higher is better (NaN counts as -inf).
-        cfg: CEM parameters; defaults to ``CEMConfig()``.
-        sampler_cfg: acceptance parameters for seeds and GMM samples; defaults to
-            ``SamplerConfig()``.
+        cfg: CEM parameters.
+        sampler_cfg: acceptance parameters for seeds and GMM samples.
         rng: random generator; defaults to ``np.random.default_rng()`` (non-deterministic).
 
     Returns:
         The :class:`CEMResult`.
     """
-    cfg = cfg or CEMConfig()
-    sampler_cfg = sampler_cfg or SamplerConfig()
     rng = rng if rng is not None else np.random.default_rng()
 
     cands = sample_candidates(cloud, cfg.num_seed_samples, rng, sampler_cfg)

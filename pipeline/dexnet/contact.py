@@ -76,7 +76,9 @@ START_OFFSET = 0.05
 
 @dataclass
 class SuctionModelConfig:
-    """Settings of the suction contact model (SI units: metres, newtons, kilograms, seconds).
+    """Settings of the suction contact model (SI units: metres, newtons, kilograms, seconds):
+    ``conf/suction/`` with the cup radius, g and the box density given by the caller, built by
+    :func:`suction_model_config`.
 
     Attributes:
         cup_radius: radius of the cup's rim, m (the paper's cup: 18 mm diameter).
@@ -97,18 +99,18 @@ class SuctionModelConfig:
         quality_threshold: a robust quality at or above this is a positive label (Dex-Net 4.0).
     """
 
-    cup_radius: float = 0.009
-    vacuum_force: float = 12.7
-    friction: float = 0.5
-    compliance: float = 0.003
-    ring_points: int = 16
-    visibility_tolerance: float = 0.003
-    gravity: float = 9.81
-    density: float = 400.0
-    perturbations: int = 16
-    sigma_position: float = 0.002
-    sigma_axis_deg: float = 5.0
-    quality_threshold: float = 0.5
+    cup_radius: float
+    vacuum_force: float
+    friction: float
+    compliance: float
+    ring_points: int
+    visibility_tolerance: float
+    gravity: float
+    density: float
+    perturbations: int
+    sigma_position: float
+    sigma_axis_deg: float
+    quality_threshold: float
 
 
 def suction_model_config(cfg, density: float) -> SuctionModelConfig:

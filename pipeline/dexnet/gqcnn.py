@@ -38,21 +38,27 @@ from pipeline.dexnet.sampling import Candidates
 
 @dataclass(frozen=True)
 class CropConfig:
-    """How a candidate's crop and pose input are made (see the module docstring)."""
+    """How a candidate's crop and pose input are made (see the module docstring): ``dexnet.crop``
+    with ``d_ground`` given by the caller, built by ``pipeline.dexnet.planner.crop_config``."""
 
-    window_px: int = 64
-    size: int = 32
-    depth_scale: float = 0.05  # m
-    missing_value: float = 1.0
-    pose_depth_scale: float = 0.1  # m
-    d_ground: float = 0.645  # m, camera to ground at the home pose (as the DCNN's D_ground)
+    window_px: int
+    size: int
+    depth_scale: float  # m
+    missing_value: float
+    pose_depth_scale: float  # m
+    # m, camera to ground at the home pose (as the DCNN's D_ground,
+    # ``pipeline.camera.geometry.ground_distance``): derived, not a key of ``dexnet.crop``
+    d_ground: float
 
 
 @dataclass(frozen=True)
 class GQCNNConfig:
-    crop_size: int = 32
-    width: int = 16
-    fc: int = 128
+    """The GQ-CNN's architecture (see the module docstring): ``dexnet.width`` and ``dexnet.fc``,
+    with ``crop_size`` = ``dexnet.crop.size``, built by ``pipeline.dexnet.planner.gqcnn_config``."""
+
+    crop_size: int
+    width: int
+    fc: int
 
 
 def crop_angle(axes_cam: np.ndarray) -> np.ndarray:

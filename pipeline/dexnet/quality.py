@@ -15,7 +15,8 @@ from pipeline.dexnet.sampling import Candidates, PointCloudImage
 
 @dataclass
 class PlanarityConfig:
-    """Parameters of :func:`disc_planarity`.
+    """Parameters of :func:`disc_planarity`: ``dexnet.planarity`` with the cup radius
+    ``hand.cup_diameter`` / 2, built by ``pipeline.dexnet.planner.planarity_config``.
 
     Attributes:
         cup_radius: suction cup radius in metres; the disc the seal needs.
@@ -24,12 +25,12 @@ class PlanarityConfig:
             ``q = 0`` (holes break the seal).
     """
 
-    cup_radius: float = 0.009
-    sigma: float = 0.001
-    min_coverage: float = 0.8
+    cup_radius: float
+    sigma: float
+    min_coverage: float
 
 
-def disc_planarity(cloud: PointCloudImage, cands: Candidates, cfg: PlanarityConfig | None = None
+def disc_planarity(cloud: PointCloudImage, cands: Candidates, cfg: PlanarityConfig
                    ) -> np.ndarray:
     """Disc approach planarity of suction candidates, in [0, 1].
 
@@ -54,12 +55,11 @@ def disc_planarity(cloud: PointCloudImage, cands: Candidates, cfg: PlanarityConf
     Args:
         cloud: the image's :class:`PointCloudImage` (must carry its ``intrinsics``).
         cands: N candidates.
-        cfg: parameters; defaults to ``PlanarityConfig()``.
+        cfg: parameters.
 
     Returns:
         (N,) float64 quality in [0, 1]; 0 for candidates with non-positive depth.
     """
-    cfg = cfg or PlanarityConfig()
     n = len(cands)
     q = np.zeros(n)
     if n == 0:

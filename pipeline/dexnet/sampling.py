@@ -32,7 +32,8 @@ from pipeline.camera.geometry import Intrinsics
 
 @dataclass
 class SamplerConfig:
-    """Parameters of gqcnn's ``DepthImageSuctionPointSampler`` (Dex-Net 4.0 suction config).
+    """Parameters of gqcnn's ``DepthImageSuctionPointSampler`` (Dex-Net 4.0 suction config):
+    ``conf/dexnet/``, built by ``pipeline.dexnet.planner.sampler_config``.
 
     Attributes:
         border_px: reject candidates closer than this many pixels to the image border, i.e. keep
@@ -44,10 +45,10 @@ class SamplerConfig:
         sobel_ksize: aperture of the ``cv2.Sobel`` derivatives used for the normals.
     """
 
-    border_px: int = 68
-    max_approach_angle_deg: float = 30.0
-    max_tries: int = 10000
-    sobel_ksize: int = 3
+    border_px: int
+    max_approach_angle_deg: float
+    max_tries: int
+    sobel_ksize: int
 
 
 @dataclass
@@ -78,7 +79,7 @@ class PointCloudImage:
         return self.depth.shape
 
 
-def point_cloud_image(depth_m: np.ndarray, intrinsics: Intrinsics, cfg: SamplerConfig | None = None,
+def point_cloud_image(depth_m: np.ndarray, intrinsics: Intrinsics, cfg: SamplerConfig,
                       object_mask: np.ndarray | None = None) -> PointCloudImage:
     """Back-project a depth image and estimate per-pixel normals, as autolab_core's
     ``CameraIntrinsics.deproject_to_image`` + ``PointCloudImage.normal_cloud_im``.
@@ -95,13 +96,12 @@ def point_cloud_image(depth_m: np.ndarray, intrinsics: Intrinsics, cfg: SamplerC
     Args:
         depth_m: (H, W) z-depth in metres; 0 or non-finite = no data.
         intrinsics: pinhole intrinsics of the (W x H) image.
-        cfg: sampler parameters (only ``sobel_ksize`` is used); defaults to ``SamplerConfig()``.
+        cfg: sampler parameters (only ``sobel_ksize`` is used).
         object_mask: optional (H, W) bool/int mask; non-zero = pixels that may be candidates.
 
     Returns:
         The :class:`PointCloudImage`.
     """
-    cfg = cfg or SamplerConfig()
     depth = np.asarray(depth_m, dtype=np.float64)
     H, W = intrinsics.height, intrinsics.width
     if depth.shape != (H, W):
@@ -197,7 +197,7 @@ class Candidates:
                           angle=np.concatenate([p.angle for p in parts]))
 
 
-def candidates_at(cloud: PointCloudImage, uv, cfg: SamplerConfig | None = None
+def candidates_at(cloud: PointCloudImage, uv, cfg: SamplerConfig
                   ) -> tuple[Candidates, np.ndarray]:
     """Candidates at given pixels, with gqcnn's acceptance tests.
 
@@ -207,8 +207,7 @@ def candidates_at(cloud: PointCloudImage, uv, cfg: SamplerConfig | None = None
     Args:
         cloud: the image's :class:`PointCloudImage`.
         uv: (N, 2) pixel (u, v); integers (non-integer values are rounded to the nearest pixel).
-        cfg: sampler parameters (``border_px``, ``max_approach_angle_deg``); defaults to
-            ``SamplerConfig()``.
+        cfg: sampler parameters (``border_px``, ``max_approach_angle_deg``).
 
     Returns:
         ``(cands, ok)``: ``ok`` is an (N,) bool array, true where the pixel is inside the image,
@@ -216,7 +215,6 @@ def candidates_at(cloud: PointCloudImage, uv, cfg: SamplerConfig | None = None
         ``cloud``, and the approach angle is <= ``max_approach_angle_deg``; ``cands`` holds the
         ``ok.sum()`` accepted candidates, in input order.
     """
-    cfg = cfg or SamplerConfig()
     uv = np.asarray(uv)
     if uv.size == 0:
         return Candidates.empty(), np.zeros(0, bool)
@@ -240,7 +238,7 @@ def candidates_at(cloud: PointCloudImage, uv, cfg: SamplerConfig | None = None
 
 
 def sample_candidates(cloud: PointCloudImage, num: int, rng: np.random.Generator,
-                      cfg: SamplerConfig | None = None) -> Candidates:
+                      cfg: SamplerConfig) -> Candidates:
     """Draw suction candidates as gqcnn's ``DepthImageSuctionPointSampler._sample_suction_points``.
 
     Pixels are drawn uniformly *without replacement* from the valid pixels, at most
@@ -253,7 +251,6 @@ def sample_candidates(cloud: PointCloudImage, num: int, rng: np.random.Generator
         Up to ``num`` distinct candidates, in draw order. **May return fewer** (possibly none)
         when the tries run out: few valid pixels, or most of them in the border or too steep.
     """
-    cfg = cfg or SamplerConfig()
     num = int(num)
     if num <= 0:
         return Candidates.empty()

@@ -34,6 +34,7 @@ from pipeline.robot.approach import first_goal
 from pipeline.robot.model import Robot, RobotConfig
 from pipeline.robot.path import PathCheckConfig, check_motion
 from pipeline.robot.target_pose import hand_rotations, rotate_about, target_camera_pose
+from pipeline.robot.urdf_builder import URDF_PATH
 from pipeline.servo.control import servo_config
 from pipeline.servo.predict import servo_motion
 from pipeline.simulation.heap import build_cell
@@ -41,7 +42,7 @@ from pipeline.simulation.heap import build_cell
 
 def robot_config(cfg) -> RobotConfig:
     """The ``RobotConfig`` of a composed config (``cfg.robot``; the URDF is the project's)."""
-    return from_section(RobotConfig, cfg.robot, urdf_path=RobotConfig.urdf_path,
+    return from_section(RobotConfig, cfg.robot, urdf_path=str(URDF_PATH),
                         base_position=tuple(cfg.robot.base_position))
 
 

@@ -45,7 +45,8 @@ FACES = (("+x", 0, 1.0), ("-x", 0, -1.0), ("+y", 1, 1.0), ("-y", 1, -1.0),
 
 @dataclass
 class SurfaceDetectionConfig:
-    """Settings of ``detect_surfaces`` (lengths in metres).
+    """Settings of ``detect_surfaces`` (lengths in metres): keys of the ``surfaces`` section
+    (``conf/surfaces/``), built by ``pipeline.labelling.scene.surface_config``.
 
     Attributes:
         distance_threshold: RANSAC inlier distance to the plane, and the distance within which a
@@ -61,10 +62,10 @@ class SurfaceDetectionConfig:
         max_surfaces_per_object: planes searched per object cluster (a box shows at most 3 faces).
         seed: base seed of RANSAC; each object's searches are seeded from (seed, instance), so
             a result does not depend on the order or number of earlier calls.
-        ransac_backend: "numpy" (default) or "open3d". Both draw ``num_iterations`` hypotheses of
-            ``ransac_n`` points and keep the one with most inliers. open3d 0.20's
-            ``segment_plane`` evaluates hypotheses on several threads that share one random
-            generator and stop early on a shared counter, so even after
+        ransac_backend: "numpy" (``conf/surfaces/ransac.yaml``'s) or "open3d". Both draw
+            ``num_iterations`` hypotheses of ``ransac_n`` points and keep the one with most
+            inliers. open3d 0.20's ``segment_plane`` evaluates hypotheses on several threads
+            that share one random generator and stop early on a shared counter, so even after
             ``o3d.utility.random.seed`` its answer varies run to run (measured: 2 different
             planes in 50 identical calls on one box's points; after refinement 1–5 of ~400
             surfaces differ between processes on noisy depth). The numpy version draws its
@@ -77,17 +78,17 @@ class SurfaceDetectionConfig:
             only diagonally apart.
     """
 
-    distance_threshold: float = 0.002
-    ransac_n: int = 3
-    num_iterations: int = 200
-    min_inliers: int = 150
-    search_min_inliers: int = 75
-    max_surfaces_per_object: int = 3
-    seed: int = 0
-    ransac_backend: str = "numpy"
-    ransac_max_points: int = 200
-    refine_iterations: int = 10
-    connectivity: int = 4
+    distance_threshold: float
+    ransac_n: int
+    num_iterations: int
+    min_inliers: int
+    search_min_inliers: int
+    max_surfaces_per_object: int
+    seed: int
+    ransac_backend: str
+    ransac_max_points: int
+    refine_iterations: int
+    connectivity: int
 
 
 # --------------------------------------------------------------------------------------------
@@ -377,7 +378,7 @@ def _find_planes(points: np.ndarray, cfg: SurfaceDetectionConfig, instance: int)
 
 
 def detect_surfaces(depth_m: np.ndarray, mask: np.ndarray, intrinsics: Intrinsics,
-                    cfg: SurfaceDetectionConfig | None = None) -> list[Surface]:
+                    cfg: SurfaceDetectionConfig) -> list[Surface]:
     """Planar surfaces of every object in a depth image (paper Figs. 4b–4c).
 
     Segmentation: the points are grouped by the simulator's instance mask, one cluster per box.
@@ -401,7 +402,7 @@ def detect_surfaces(depth_m: np.ndarray, mask: np.ndarray, intrinsics: Intrinsic
         depth_m: (H, W) float z-depth, metres; 0 = no data.
         mask: (H, W) integer instance mask, 0 = not an object.
         intrinsics: the camera's intrinsics.
-        cfg: settings; defaults to ``SurfaceDetectionConfig()``.
+        cfg: settings.
 
     Returns:
         Surfaces ordered by instance, then by decreasing pixel count. ``num_points`` is the
@@ -410,7 +411,6 @@ def detect_surfaces(depth_m: np.ndarray, mask: np.ndarray, intrinsics: Intrinsic
         assigned to the plane before keeping the largest region) and ``regions``. Deterministic:
         the same inputs give the same output.
     """
-    cfg = cfg or SurfaceDetectionConfig()
     _check_images(depth_m, mask, intrinsics)
     if cfg.connectivity not in (4, 8):
         raise ValueError(f"connectivity must be 4 or 8, not {cfg.connectivity}")

@@ -339,7 +339,8 @@ class SuctionGripper:
 
     Usage::
 
-        gripper = SuctionGripper(client, robot, SuctionModelConfig(), cup_offset=CUP_OFFSET)
+        gripper = SuctionGripper(client, robot, suction_model_config(cfg, density),
+                                 cup_offset=float(cfg.hand.cup_offset))
         out = gripper.try_grasp("B", {box_id: box_mass})
         if out.held: ...  # move the robot; the box follows
         gripper.release()

@@ -190,15 +190,13 @@ class PickRunner:
 
     def __init__(self, cfg, cell: PickCell, planner, planner_name: str) -> None:
         from pipeline.picking.suction import SuctionGripper
-        from pipeline.config.build import from_section
         from pipeline.dexnet.contact import suction_model_config
         from pipeline.servo.control import servo_config
-        from pipeline.servo.descriptor import DescriptorConfig
+        from pipeline.servo.descriptor import descriptor_config
 
         self.cfg, self.cell, self.planner, self.name = cfg, cell, planner, planner_name
-        s = cfg.servo
-        self.dt = 1.0 / float(s.control_rate_hz)
-        self.descriptor_cfg = from_section(DescriptorConfig, s)
+        self.dt = 1.0 / float(cfg.servo.control_rate_hz)
+        self.descriptor_cfg = descriptor_config(cfg)
         self.servo_cfg = servo_config(cfg)
         self.suction_cfg = suction_model_config(cfg, float(cfg.eval_boxes.density))
         self.gripper_factory = lambda: SuctionGripper(cell.client, cell.robot, self.suction_cfg,

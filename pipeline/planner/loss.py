@@ -30,15 +30,24 @@ from dataclasses import dataclass
 import torch
 import torch.nn.functional as F
 
+from pipeline.config.build import from_section
 from pipeline.planner.network import split_output
 
 
 @dataclass
 class LossConfig:
-    alpha: float = 0.25  # paper Sec. 4.1
-    gamma: float = 2.0
-    lambda_coord: float = 1.0
-    lambda_class: float = 1.0
+    """Focal-loss parameters and term weights (Eqs. 4–6): ``alpha``, ``gamma``, ``lambda_coord``
+    and ``lambda_class`` of the ``train`` section, built by :func:`loss_config`."""
+
+    alpha: float  # paper Sec. 4.1
+    gamma: float
+    lambda_coord: float
+    lambda_class: float
+
+
+def loss_config(cfg) -> LossConfig:
+    """The loss of a composed config (``cfg.train``)."""
+    return from_section(LossConfig, cfg.train)
 
 
 def focal_terms(logits: torch.Tensor, targets: torch.Tensor, alpha: float,
@@ -55,7 +64,7 @@ def focal_terms(logits: torch.Tensor, targets: torch.Tensor, alpha: float,
 
 
 def grasp_loss(raw: torch.Tensor, targets: dict[str, torch.Tensor],
-               cfg: LossConfig | None = None) -> dict[str, torch.Tensor]:
+               cfg: LossConfig) -> dict[str, torch.Tensor]:
     """Eqs. 4–6 for a batch.
 
     Args:
@@ -68,7 +77,6 @@ def grasp_loss(raw: torch.Tensor, targets: dict[str, torch.Tensor],
         dict of scalar tensors ``total``, ``coord``, ``class`` (batch means of per-image values)
         and ``num_points`` (B,) the per-image B.
     """
-    cfg = cfg or LossConfig()
     offset_pred, class_logits = split_output(raw)  # (B, N, N, 2) in (0, 1), (B, N, N, C)
     obj = targets["obj"].to(raw.device).bool()  # (B, N, N)
     offset_true = targets["offset"].to(raw.device, raw.dtype)  # (B, N, N, 2)

@@ -55,11 +55,14 @@ CLASS_PRIOR = 0.01
 
 @dataclass
 class NetworkConfig:
-    width: float = 1.0  # channel multiplier on Darknet-19 widths
-    grid: int = 13  # N, cells per side (paper: 13)
-    input_size: int = 416  # pixels per side
-    num_classes: int = 4  # R, L, B, NG
-    leaky_slope: float = 0.1
+    """The DCNN's shape: the ``model`` group (``conf/model/``, the width set by the experiment),
+    built by :func:`network_config`."""
+
+    width: float  # channel multiplier on Darknet-19 widths
+    grid: int  # N, cells per side (paper: 13)
+    input_size: int  # pixels per side
+    num_classes: int  # R, L, B, NG
+    leaky_slope: float
 
     def __post_init__(self):
         if self.input_size != self.grid * 32:
@@ -103,9 +106,9 @@ class ConvBlock(nn.Module):
 class GraspNet(nn.Module):
     """Depth image (B, 1, S, S) → raw grid output (B, 2 + num_classes, S/32, S/32)."""
 
-    def __init__(self, cfg: NetworkConfig | None = None):
+    def __init__(self, cfg: NetworkConfig):
         super().__init__()
-        self.cfg = cfg = cfg or NetworkConfig()
+        self.cfg = cfg
         w, slope = cfg.width, cfg.leaky_slope
         self.out_channels = NUM_COORDS + cfg.num_classes
 

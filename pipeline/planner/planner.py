@@ -24,6 +24,7 @@ with ``weights_only=True``.
 from __future__ import annotations
 
 import dataclasses
+import math
 from pathlib import Path
 from typing import Callable
 
@@ -33,6 +34,7 @@ import torch
 from pipeline.camera.depth_filter import preprocess_depth
 from pipeline.camera.depth_input import check_depth_image
 from pipeline.camera.geometry import Intrinsics, ground_distance
+from pipeline.config.build import from_section
 from pipeline.labelling.types import GraspClass
 from pipeline.planner.data import Normalisation, normalise_depth
 from pipeline.planner.decode import decode_output
@@ -224,10 +226,15 @@ def _has_data(depth_m: np.ndarray, u: float, v: float) -> bool:
 
 
 def ranking_config(cfg, threshold: float) -> RankingConfig:
-    """The ranking config of a pipeline config with th = ``threshold`` (the training stage's
-    calibrated or fixed value, ``pipeline.planner.calibration``) and D_ground
-    (``pipeline.camera.geometry.ground_distance``, Eq. 9)."""
-    return RankingConfig(d_ground=ground_distance(cfg.camera, cfg.bin), threshold=float(threshold))
+    """The ranking config of a pipeline config (``train.ranking``, its angles in degrees) with
+    th = ``threshold`` (the training stage's calibrated or fixed value,
+    ``pipeline.planner.calibration``) and D_ground (``pipeline.camera.geometry.ground_distance``,
+    Eq. 9)."""
+    r = cfg.train.ranking
+    return from_section(RankingConfig, r, d_ground=ground_distance(cfg.camera, cfg.bin),
+                        threshold=float(threshold),
+                        phi_switch=math.radians(float(r.phi_switch_deg)),
+                        inclination_tie=math.radians(float(r.inclination_tie_deg)))
 
 
 def ranking_dict(r: RankingConfig) -> dict:

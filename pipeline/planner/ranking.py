@@ -45,13 +45,19 @@ from pipeline.planner.decode import GraspPrediction
 
 @dataclass
 class RankingConfig:
+    """How candidates are ranked: ``train.ranking`` (angles there in degrees), with D_ground
+    (``pipeline.camera.geometry.ground_distance``) and th (the training stage's calibrated or
+    fixed value) given by the caller; built by ``pipeline.planner.planner.ranking_config`` and
+    stored with the model. The closed loop replaces ``policy`` and ``inclination_tie`` by
+    ``evaluate.ranking_policy`` and ``evaluate.inclination_tie_deg``."""
+
     d_ground: float  # D_ground, camera-to-ground distance at the home pose, metres (Eq. 9)
-    threshold: float = 0.5  # th of Eq. 3 (the paper gives no value)
-    phi_switch: float = math.pi / 6  # Eq. 7's switch from J_distance to J_inclination, rad
-    normal_half_window: int = 3  # h: the normal is averaged over (2h + 1)² pixels
-    max_depth_jump: float = 0.02  # m; a larger depth step to a neighbour marks an edge
-    policy: str = "paper"  # "paper" | "height_tiebreak" (module docstring)
-    inclination_tie: float = math.radians(10.0)  # rad; "height_tiebreak": inclinations this close tie
+    threshold: float  # th of Eq. 3 (the paper gives no value)
+    phi_switch: float  # Eq. 7's switch from J_distance to J_inclination, rad
+    normal_half_window: int  # h: the normal is averaged over (2h + 1)² pixels
+    max_depth_jump: float  # m; a larger depth step to a neighbour marks an edge
+    policy: str  # "paper" | "height_tiebreak" (module docstring)
+    inclination_tie: float  # rad; "height_tiebreak": inclinations this close tie
 
 
 POLICIES = ("paper", "height_tiebreak")
@@ -119,7 +125,7 @@ def inclination(normal_cam: np.ndarray) -> float:
 
 
 def graspability(depth: float, phi: float, d_ground: float,
-                 phi_switch: float = math.pi / 6) -> tuple[float, float, float]:
+                 phi_switch: float) -> tuple[float, float, float]:
     """Eqs. 7, 9, 10 → (J, J_distance, J_inclination)."""
     j_distance = 1.0 - depth / d_ground
     j_inclination = 1.0 - 2.0 * phi / math.pi

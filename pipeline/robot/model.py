@@ -17,7 +17,6 @@ import numpy as np
 import pybullet as p
 
 from pipeline.camera.geometry import camera_pose_above_bin, pose_matrix, quat_from_matrix
-from pipeline.robot.urdf_builder import URDF_PATH
 
 
 @dataclass
@@ -29,24 +28,28 @@ class RobotConfig:
     −0.50} and z ∈ {−0.02, 0.1, 0.2, 0.3}: on the ground the home pose is out of reach; at
     (−0.42, 0, 0.10) every straight-down grasp pose (B, L, R; standoff 0.15 m) over the bin
     floor is kinematically reachable, and 97 % of a set of raised and 35–50° tilted surfaces.
+
+    The values are the ``robot`` section (``conf/robot/``), with the project's URDF
+    (``urdf_builder.URDF_PATH``) given by the caller, built by
+    ``pipeline.labelling.robot_check.robot_config``.
     """
 
-    urdf_path: str = str(URDF_PATH)
-    base_position: tuple = (-0.42, 0.0, 0.10)  # bottom centre of the arm's base, world frame
-    base_yaw_deg: float = 0.0  # 0: the arm's zero pose reaches towards +x
-    pedestal_half_size_xy: float = 0.08  # drawn under the base when load() gets a ground height
-    home_camera_height: float = 0.625  # = camera.height_above_bin_floor (paper Sec. 4.3)
-    ik_max_iterations: int = 100  # per pybullet call; 20 (the default) leaves cm errors
-    ik_residual_threshold: float = 1e-6  # m, pybullet's early exit
-    ik_joint_damping: float = 1e-3  # DLS damping; pybullet's default 0.1 converges slowly
-    ik_hand_damping: float = 0.1  # joint7: damped harder so the hand tilts only when it helps
-    ik_refinements: int = 4  # pybullet calls per seed, each from the last (clamped) answer
-    ik_restarts: int = 8  # extra seeds (perturbations of home) after the first seeds fail
-    ik_restart_noise_rad: float = 1.0  # std-dev of the seed perturbations
-    position_tolerance: float = 0.002  # m, FK check of an IK answer
-    orientation_tolerance_deg: float = 1.0
-    collision_margin: float = 0.005  # m, closer than this to an obstacle counts as a collision
-    self_collision_margin: float = 0.0  # m, for robot link pairs ≥ 3 joints apart
+    urdf_path: str  # the robot's URDF file (not a key of the ``robot`` section)
+    base_position: tuple  # bottom centre of the arm's base, world frame
+    base_yaw_deg: float  # 0: the arm's zero pose reaches towards +x
+    pedestal_half_size_xy: float  # drawn under the base when load() gets a ground height
+    home_camera_height: float  # = camera.height_above_bin_floor (paper Sec. 4.3)
+    ik_max_iterations: int  # per pybullet call; 20 (pybullet's default) leaves cm errors
+    ik_residual_threshold: float  # m, pybullet's early exit
+    ik_joint_damping: float  # DLS damping; pybullet's default 0.1 converges slowly
+    ik_hand_damping: float  # joint7: damped harder so the hand tilts only when it helps
+    ik_refinements: int  # pybullet calls per seed, each from the last (clamped) answer
+    ik_restarts: int  # extra seeds (perturbations of home) after the first seeds fail
+    ik_restart_noise_rad: float  # std-dev of the seed perturbations
+    position_tolerance: float  # m, FK check of an IK answer
+    orientation_tolerance_deg: float
+    collision_margin: float  # m, closer than this to an obstacle counts as a collision
+    self_collision_margin: float  # m, for robot link pairs ≥ 3 joints apart
 
 
 @dataclass
@@ -106,7 +109,7 @@ class Robot:
 
     Usage::
 
-        robot = Robot(RobotConfig()); robot.load(client)
+        robot = Robot(robot_config(cfg)); robot.load(client)
         res = robot.solve_ik(T_world_cam, obstacle_ids=bin_and_box_ids)
         if res.ok: robot.set_joints(res.q)
 
@@ -114,8 +117,8 @@ class Robot:
     robot that a running physics simulation is driving unless that is intended.
     """
 
-    def __init__(self, cfg: RobotConfig | None = None):
-        self.cfg = cfg or RobotConfig()
+    def __init__(self, cfg: RobotConfig):
+        self.cfg = cfg
         self.client: int | None = None
         self.body_id: int | None = None
         self.pedestal_id: int | None = None

@@ -21,13 +21,14 @@ import numpy as np
 
 @dataclass(frozen=True)
 class PathCheckConfig:
-    """How finely a motion is sampled and how far it keeps from the bin (``robot.path_*``)."""
+    """How finely a motion is sampled and how far it keeps from the bin: ``robot.path``, built
+    by ``pipeline.labelling.robot_check.path_config``."""
 
-    step_m: float = 0.01  # largest camera translation between samples, metres
-    step_deg: float = 2.0  # largest camera rotation between samples, degrees
+    step_m: float  # largest camera translation between samples, metres
+    step_deg: float  # largest camera rotation between samples, degrees
     # extra clearance from the padded bodies (the bin), on top of robot.collision_margin, for
     # a servo that strays from the predicted path (evaluate records how far, per attempt)
-    bin_clearance: float = 0.0
+    bin_clearance: float
 
 
 @dataclass

@@ -30,16 +30,16 @@ Control law (Eq. 23): ``[V; Ω] = −λ_eff M⁻¹ e``, i.e. ``Ω = −λ_eff u�
 
 Choices (documented here because the paper leaves them open):
 
-* **Gain per control step** (``ServoConfig.gain_per_step``, default True). Eq. 23 is a
-  continuous law and the paper sets λ = 0.4. Read as 0.4 s⁻¹ the error would shrink by e only
+* **Gain per control step** (``ServoConfig.gain_per_step``, true in ``conf/servo/``). Eq. 23 is
+  a continuous law and the paper sets λ = 0.4. Read as 0.4 s⁻¹ the error would shrink by e only
   every 2.5 s (a 0.4 m approach would take ~15 s), incompatible with the paper's > 1000 picks
   per hour. We therefore read λ as the discrete gain of one control iteration, as ViSP-style
   loops do (``v = −λ L⁻¹ e`` sent for one period): ``λ_eff = λ / dt``, so one period ``dt``
   removes the fraction λ of the error (to first order). ``gain_per_step=False`` gives the
   literal continuous law ``λ_eff = λ`` (1/s) and ignores ``dt``.
 * **Speed limits**: the raw twist is scaled by one common factor
-  ``s = min(1, v_max/|V|, ω_max/|Ω|)`` (``ServoConfig.uniform_clamp``, default True). Both the
-  linear and the angular part keep their direction *and* their ratio, so the coupling term
+  ``s = min(1, v_max/|V|, ω_max/|Ω|)`` (``ServoConfig.uniform_clamp``, true in ``conf/servo/``).
+  Both the linear and the angular part keep their direction *and* their ratio, so the coupling term
   ``−Z L_v⁻¹ L_w uθ`` of V still matches Ω and every error component keeps decaying along the
   same (straight-line) path, only slower. ``uniform_clamp=False`` scales the linear and the
   angular part independently (each keeps its direction, the coupling is lost while clamped).
@@ -83,21 +83,24 @@ _OFF_SIGN = {"L": -1.0, "B": 0.0, "R": 1.0}  # Eq. 18, in units of cup_offset
 
 @dataclass
 class ServoConfig:
-    """Parameters of the 2.5D visual servoing law (paper Sec. 5.2). Metres, radians, seconds."""
+    """Parameters of the 2.5D visual servoing law (paper Sec. 5.2). Metres, radians, seconds.
 
-    gain: float = 0.4  # λ of Eq. 23 (per control step when gain_per_step, else 1/s)
-    standoff: float = 0.15  # d* (m), Eqs. 17, 22, 23
-    cup_offset: float = 0.035  # |off| of Eq. 18 (m)
-    tolerance_xy: float = 0.01  # converged when |x − x*|, |y − y*| (normalised coords) below ...
-    tolerance_log_z: float = 0.01  # ... |log Z − log d*| below this ...
-    tolerance_rot_deg: float = 1.0  # ... and |uθ| below this (degrees)
-    max_linear_speed: float = 0.5  # m/s, camera (clamp keeping the direction)
-    max_angular_speed: float = 1.5  # rad/s
-    gain_per_step: bool = True  # λ is the discrete gain of one period dt: λ_eff = λ/dt
-    uniform_clamp: bool = True  # one scale factor for V and Ω (keeps their ratio)
-    # optional (3,) desired position of the surface centre in the camera frame at the goal (m):
+    The ``servo`` section with d* and the cup offset from ``hand`` and ``target_point`` given
+    by the caller (None: Eqs. 17–18's goal), built by :func:`servo_config`."""
+
+    gain: float  # λ of Eq. 23 (per control step when gain_per_step, else 1/s)
+    standoff: float  # d* (m), Eqs. 17, 22, 23
+    cup_offset: float  # |off| of Eq. 18 (m)
+    tolerance_xy: float  # converged when |x − x*|, |y − y*| (normalised coords) below ...
+    tolerance_log_z: float  # ... |log Z − log d*| below this ...
+    tolerance_rot_deg: float  # ... and |uθ| below this (degrees)
+    max_linear_speed: float  # m/s, camera (clamp keeping the direction)
+    max_angular_speed: float  # rad/s
+    gain_per_step: bool  # λ is the discrete gain of one period dt: λ_eff = λ/dt
+    uniform_clamp: bool  # one scale factor for V and Ω (keeps their ratio)
+    # (3,) desired position of the surface centre in the camera frame at the goal (m), or None:
     # a goal other than Eqs. 17–18's (the closed loop's pre-grasp above the grasp pose)
-    target_point: Optional[tuple] = None
+    target_point: Optional[tuple]
 
 
 def servo_config(cfg) -> ServoConfig:
@@ -165,10 +168,9 @@ def _axis_angle_to(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return c / s * _angle(a, b)
 
 
-def target_features(pattern, cfg: ServoConfig | None = None) -> np.ndarray:
+def target_features(pattern, cfg: ServoConfig) -> np.ndarray:
     """``p_e*`` (3,) of Eqs. 17–18: ``[0, off/d*, log d*]``, off = −/0/+ cup_offset for L/B/R;
     or, with ``cfg.target_point``, that point's features (Eq. 16)."""
-    cfg = cfg or ServoConfig()
     if cfg.target_point is not None:
         return current_features(cfg.target_point)
     off = _OFF_SIGN[_pattern_name(pattern)] * cfg.cup_offset
@@ -272,12 +274,11 @@ def rotation_error(normal_cam, warped_long, warped_short) -> np.ndarray:
     return _rotation_error(normal_cam, warped_long, warped_short)[0]
 
 
-def interaction_matrix(p_e, Z: float, cfg: ServoConfig | None = None) -> np.ndarray:
+def interaction_matrix(p_e, Z: float, cfg: ServoConfig) -> np.ndarray:
     """``M`` (6, 6) of Eqs. 19–22: ``[[L_v/(d* ρ), L_w], [0, I3]]``, ρ = Z/d*.
 
     ``p_e`` (3,) current features (only x, y are used), ``Z`` the centre's depth (m).
     """
-    cfg = cfg or ServoConfig()
     x, y = float(p_e[0]), float(p_e[1])
     rho = Z / cfg.standoff
     L_v = np.array([[-1.0, 0.0, x], [0.0, -1.0, y], [0.0, 0.0, -1.0]])
@@ -289,13 +290,12 @@ def interaction_matrix(p_e, Z: float, cfg: ServoConfig | None = None) -> np.ndar
     return M
 
 
-def clamp_twist(twist, cfg: ServoConfig | None = None) -> tuple[np.ndarray, float]:
+def clamp_twist(twist, cfg: ServoConfig) -> tuple[np.ndarray, float]:
     """The twist (6,) limited to ``max_linear_speed`` / ``max_angular_speed``, and the scale.
 
-    Uniform (default): one factor for all six components. Otherwise the linear and angular
+    Uniform (``uniform_clamp``): one factor for all six components. Otherwise the linear and angular
     parts are scaled separately (the returned scale is the smaller factor). Directions are kept.
     """
-    cfg = cfg or ServoConfig()
     t = np.asarray(twist, dtype=np.float64).reshape(6)
     v, w = float(np.linalg.norm(t[:3])), float(np.linalg.norm(t[3:]))
     s_v = min(1.0, cfg.max_linear_speed / v) if v > 0 else 1.0
@@ -307,7 +307,7 @@ def clamp_twist(twist, cfg: ServoConfig | None = None) -> tuple[np.ndarray, floa
 
 
 def servo_velocity(center_cam, normal_cam, warped_long, warped_short, pattern,
-                   cfg: ServoConfig | None = None, dt: float | None = None,
+                   cfg: ServoConfig, dt: float | None = None,
                    reference_x=None) -> ServoCommand:
     """Eq. 23: the camera twist that drives ``e`` to zero, clamped to the speed limits.
 
@@ -326,7 +326,6 @@ def servo_velocity(center_cam, normal_cam, warped_long, warped_short, pattern,
     Returns:
         :class:`ServoCommand` with the camera-frame twist ``[V; Ω]`` (6,).
     """
-    cfg = cfg or ServoConfig()
     if cfg.gain_per_step:
         if dt is None or dt <= 0:
             raise ValueError("servo_velocity needs the control period dt > 0 when gain_per_step")

@@ -108,6 +108,7 @@ import numpy as np
 
 from pipeline.camera.depth_input import check_depth_image
 from pipeline.camera.geometry import Intrinsics
+from pipeline.config.build import from_section
 from pipeline.labelling.hand import warped_axes
 from pipeline.labelling.surfaces import fit_plane, region_surface
 
@@ -119,7 +120,8 @@ NO_SURFACE_REASONS = ("seed_outside_image", "no_depth_at_seed", "too_few_window_
 
 @dataclass
 class DescriptorConfig:
-    """Settings of ``describe_surface`` (lengths in metres).
+    """Settings of ``describe_surface`` (lengths in metres): keys of the ``servo`` section
+    (``conf/servo/``), built by :func:`descriptor_config`.
 
     Attributes:
         window: side of the square seed window for the plane fit of Eq. 11, pixels (odd).
@@ -156,19 +158,24 @@ class DescriptorConfig:
             whatever it is).
     """
 
-    window: int = 21
-    eps_distance: float = 0.004
-    eps_normal: float = 0.05
-    min_pixels: int = 50
-    connectivity: int = 4
-    window_hypotheses: int = 50
-    window_refits: int = 2
-    rim: int = 1
-    normal_smoothing: int = 0
-    refine: bool = True
-    window_tolerance_depth: float = 0.0  # m; > 0: window RANSAC tolerance ε1·min(1, Z/this)
-    seed_repair: bool = True
-    track_normal_deg: float = 0.0  # > 0: stay on the surface whose normal is expected
+    window: int
+    eps_distance: float
+    eps_normal: float
+    min_pixels: int
+    connectivity: int
+    window_hypotheses: int
+    window_refits: int
+    rim: int
+    normal_smoothing: int
+    refine: bool
+    window_tolerance_depth: float  # m; > 0: window RANSAC tolerance ε1·min(1, Z/this)
+    seed_repair: bool
+    track_normal_deg: float  # > 0: stay on the surface whose normal is expected
+
+
+def descriptor_config(cfg) -> DescriptorConfig:
+    """The descriptor of a composed config (``cfg.servo``)."""
+    return from_section(DescriptorConfig, cfg.servo)
 
 
 @dataclass
@@ -359,7 +366,7 @@ def split_region(points: np.ndarray, sites: np.ndarray) -> np.ndarray:
 
 
 def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
-                     cfg: DescriptorConfig | None = None,
+                     cfg: DescriptorConfig,
                      expected_normal_cam: np.ndarray | None = None,
                      sites_cam: np.ndarray | None = None
                      ) -> tuple[SurfaceFeatures | None, str]:
@@ -371,7 +378,7 @@ def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
             data (``pipeline.camera.depth_input.check_depth_image``).
         intrinsics: of ``depth_m`` (its size must match).
         seed_uv: (2,) seed pixel g = (u, v), rounded to the nearest pixel.
-        cfg: settings; defaults to ``DescriptorConfig()``.
+        cfg: settings.
         expected_normal_cam: (3,) optional, the normal the surface should have in this camera
             frame (the tracked surface's, moved by the camera's motion); used with
             ``cfg.track_normal_deg``.
@@ -397,7 +404,6 @@ def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
     Cost: ~4 ms for a 416 × 416 image with a box face of ~15 000 pixels, ~20 ms when the face
     fills the image (see the module docstring).
     """
-    cfg = cfg or DescriptorConfig()
     if cfg.connectivity not in (4, 8):
         raise ValueError(f"connectivity must be 4 or 8, not {cfg.connectivity}")
     H, W = intrinsics.height, intrinsics.width
