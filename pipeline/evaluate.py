@@ -58,8 +58,9 @@ from pipeline.robot.approach import check_approach
 from pipeline.tracking import StageLog
 
 STAGE = "evaluate"
+# train.ranking: the oracle ranks with it (the DCNN with its model's, part of the train version)
 SECTIONS = ("seed", "camera", "sensor", "depth_filter", "bin", "physics", "hand", "robot",
-            "suction", "dexnet", "motion", "servo", "eval_boxes", "evaluate")
+            "suction", "dexnet", "motion", "servo", "eval_boxes", "evaluate", "train.ranking")
 NOT_AFFECTING_RESULT = ("evaluate.train_version", "evaluate.baseline_version",
                         "evaluate.workers", "evaluate.force", "evaluate.log_trials",
                         "evaluate.num_threads")
