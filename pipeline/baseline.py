@@ -50,6 +50,7 @@ from pipeline.artifacts import (
     stage_config,
 )
 from pipeline.artifacts.store import ArtifactError, StageRun
+from pipeline.camera.geometry import gravity_in_camera
 from pipeline.cli import CONF_DIR, data_root, stage_main
 from pipeline.dataset.pixels import pixels_to_points
 from pipeline.dataset.scenes import SPLIT_CODES, SPLITS, Scene, SceneDataset
@@ -94,11 +95,6 @@ CANDIDATE_FIELDS = {
 
 # --------------------------------------------------------------------------------------------
 # Candidate labels
-
-
-def gravity_in_camera(T_world_cam: np.ndarray) -> np.ndarray:
-    """World gravity direction (0, 0, −1) in the camera frame: (3,) unit vector."""
-    return np.asarray(T_world_cam, np.float64)[:3, :3].T @ np.array([0.0, 0.0, -1.0])
 
 
 def label_scene_candidates(scene: Scene, cfg, count: int) -> dict[str, np.ndarray]:
