@@ -547,8 +547,6 @@ def _train_artifact(cfg) -> Path | None:
 
 def baseline(cfg: DictConfig) -> Path:
     """Label candidates, train the GQ-CNN, evaluate Table 2; returns the artifact folder."""
-    gen_dir = resolve_artifact(data_root(cfg), STAGE_UPSTREAM, cfg.baseline.generate_version,
-                               verify=True, key="baseline.generate_version")
     for variant in cfg.baseline.variants:
         if variant not in BASELINE_VARIANTS:
             raise ValueError(f"baseline.variants has {variant!r}: choose from "
@@ -556,6 +554,8 @@ def baseline(cfg: DictConfig) -> Path:
     with_ood = OOD in cfg.baseline.variants
     if with_ood:
         check_ood_config(cfg)
+    gen_dir = resolve_artifact(data_root(cfg), STAGE_UPSTREAM, cfg.baseline.generate_version,
+                               verify=True, key="baseline.generate_version")
     train_dir = _train_artifact(cfg)
     upstream = {"generate": gen_dir.name}
     if train_dir is not None:

@@ -83,6 +83,33 @@ class ObjectHeapScene:
     poses: np.ndarray
 
 
+def label_candidates(client: int, graspable: list[int], cands: Candidates,
+                     depth_clean_m: np.ndarray, mask: np.ndarray, intrinsics: Intrinsics,
+                     T_world_cam: np.ndarray, model, rng: np.random.Generator
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Robust quality and unperturbed contact outcome of candidates on the live bodies of
+    ``client`` (``contact_mesh``; one ``RayScene`` mirror for both), gravity along world -z.
+
+    Args:
+        client: the pybullet client, posed as in the image; graspable: its object body ids,
+            in mask order (mask value k = ``graspable[k-1]``).
+        cands: (M,) candidates, camera frame; depth_clean_m, mask: (H, W) ideal depth (m) and
+            instance mask of the image; intrinsics, T_world_cam: the camera's.
+        model: the ``SuctionModelConfig``; rng: source of the perturbations.
+
+    Returns:
+        quality: (M,) float64 in [0, 1]; reason: (M,) int8 index into ``contact.REASONS``.
+    """
+    if len(cands) == 0 or not graspable:
+        return np.zeros(len(cands)), np.zeros(len(cands), np.int8)
+    args = (depth_clean_m, mask, intrinsics, T_world_cam, client, list(graspable),
+            gravity_in_camera(T_world_cam), model)
+    with RayScene(client) as rays:
+        quality = robust_quality_mesh(cands.point, cands.axis, *args, rng, rays=rays)
+        reason = evaluate_contacts_mesh(cands.point, cands.axis, *args, rays=rays).reason
+    return np.asarray(quality, np.float64), np.asarray(reason, np.int8)
+
+
 def _stored(depth_m: np.ndarray, unit: float) -> np.ndarray:
     """Depth as a generation shard stores and returns it: rounded to ``unit`` (uint16), m."""
     return (np.round(np.asarray(depth_m, np.float64) / unit).astype(np.uint16)
@@ -132,14 +159,8 @@ def object_heap_scene(client: int, cfg, rng: np.random.Generator, count: int, se
     cloud = point_cloud_image(depth, intr, sampler, object_mask=object_mask)
     cands = sample_candidates(cloud, int(count), rng, sampler)
     model = suction_model_config(cfg, float(cfg.objects.density))
-    if len(cands) and ids:
-        g = gravity_in_camera(T_world_cam)
-        args = (depth_clean, mask, intr, T_world_cam, client, ids, g, model)
-        with RayScene(client) as rays:
-            quality = robust_quality_mesh(cands.point, cands.axis, *args, rng, rays=rays)
-            reason = evaluate_contacts_mesh(cands.point, cands.axis, *args, rays=rays).reason
-    else:
-        quality, reason = np.zeros(len(cands)), np.zeros(len(cands), np.int8)
+    quality, reason = label_candidates(client, ids, cands, depth_clean, mask, intr, T_world_cam,
+                                       model, rng)
     crop = crop_config(cfg)
     crops, poses = candidate_inputs(depth, cands, crop)
     crops = np.asarray(crops, np.float16).reshape(len(cands), 1, crop.size, crop.size)
