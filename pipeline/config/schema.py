@@ -441,7 +441,7 @@ class EvaluateConfig:
     """The closed-loop evaluation stage (``pipeline.evaluate``)."""
 
     planners: List[str] = MISSING
-    dexnet_variant: str = MISSING  # gqcnn | planarity
+    dexnet_variant: str = MISSING  # gqcnn | gqcnn_ood | planarity (a baseline variant)
     dexnet_pattern: str = MISSING  # the cup that serves Dex-Net's single suction point
     dcnn_threshold: Optional[float] = MISSING  # th of Eq. 3 for the closed loop; None: the model's
     stop_on_box_contact: bool = MISSING  # True: touching any box but the target fails the attempt
