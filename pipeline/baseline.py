@@ -13,6 +13,10 @@ the way Dex-Net 3.0/4.0 build theirs, on this project's own simulated heaps
    mass (``pipeline.dexnet.contact``). Quality ≥ ``suction.quality_threshold``: a positive.
 2. **GQ-CNN** (``pipeline.dexnet.gqcnn``): trained on the train split's candidates (crop +
    pose → robust or not), Adam, binary cross-entropy; validation loss and accuracy per epoch.
+2b. **Out of domain** (variant ``gqcnn_ood``, Dex-Net 4.0's way): heaps of random convex
+   non-box objects (``conf/objects/``, ``baseline.ood``) built, rendered, sampled and labelled
+   by ``pipeline.dexnet.ood`` (the mesh contact model on the live bodies), and the same GQ-CNN
+   trained on them (``gqcnn_ood.pt``), then planning on the same box test images.
 3. **Table 2** on the test split: the project's DCNN planner (the training artifact
    ``baseline.train_version``) and each variant in ``baseline.variants`` (``gqcnn``: the CEM
    scored by the GQ-CNN; ``planarity``: the CEM scored by the analytic disc planarity) plan on
@@ -23,7 +27,8 @@ the way Dex-Net 3.0/4.0 build theirs, on this project's own simulated heaps
 Artifact (``data/baseline/<version>/``)::
 
     candidates/<split>-<shard>.npz   labelled candidates, aligned with the generation shards
-    gqcnn.pt                         GQ-CNN weights + network and crop config (weights_only)
+    ood/<split>-<shard>.npz          gqcnn_ood: labelled candidates on object heaps, with crops
+    gqcnn.pt, gqcnn_ood.pt           GQ-CNN weights + network and crop config (weights_only)
     table2.csv, table2_curve.csv     Table 2 and its curve (no timings: they are in the manifest)
     chosen.npz                       per test image: every planner's point, score and distance
     log.rrd, log.mcap                training curves, labelled candidates, test images with
