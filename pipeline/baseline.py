@@ -13,6 +13,10 @@ the way Dex-Net 3.0/4.0 build theirs, on this project's own simulated heaps
    mass (``pipeline.dexnet.contact``). Quality ≥ ``suction.quality_threshold``: a positive.
 2. **GQ-CNN** (``pipeline.dexnet.gqcnn``): trained on the train split's candidates (crop +
    pose → robust or not), Adam, binary cross-entropy; validation loss and accuracy per epoch.
+2b. **Out of domain** (variant ``gqcnn_ood``, Dex-Net 4.0's way): heaps of random convex
+   non-box objects (``conf/objects/``, ``baseline.ood``) built, rendered, sampled and labelled
+   by ``pipeline.dexnet.ood`` (the mesh contact model on the live bodies), and the same GQ-CNN
+   trained on them (``gqcnn_ood.pt``), then planning on the same box test images.
 3. **Table 2** on the test split: the project's DCNN planner (the training artifact
    ``baseline.train_version``) and each variant in ``baseline.variants`` (``gqcnn``: the CEM
    scored by the GQ-CNN; ``planarity``: the CEM scored by the analytic disc planarity) plan on
@@ -23,7 +27,8 @@ the way Dex-Net 3.0/4.0 build theirs, on this project's own simulated heaps
 Artifact (``data/baseline/<version>/``)::
 
     candidates/<split>-<shard>.npz   labelled candidates, aligned with the generation shards
-    gqcnn.pt                         GQ-CNN weights + network and crop config (weights_only)
+    ood/<split>-<shard>.npz          gqcnn_ood: labelled candidates on object heaps, with crops
+    gqcnn.pt, gqcnn_ood.pt           GQ-CNN weights + network and crop config (weights_only)
     table2.csv, table2_curve.csv     Table 2 and its curve (no timings: they are in the manifest)
     chosen.npz                       per test image: every planner's point, score and distance
     log.rrd, log.mcap                training curves, labelled candidates, test images with
@@ -50,14 +55,20 @@ from pipeline.artifacts import (
     stage_config,
 )
 from pipeline.artifacts.store import ArtifactError, StageRun
+from pipeline.camera.geometry import gravity_in_camera
 from pipeline.cli import CONF_DIR, data_root, stage_main
 from pipeline.dataset.pixels import pixels_to_points
 from pipeline.dataset.scenes import SPLIT_CODES, SPLITS, Scene, SceneDataset
 from pipeline.dataset.storage import read_npz, write_npz
 from pipeline.dexnet.contact import REASONS, evaluate_contacts, robust_quality, suction_model_config
 from pipeline.dexnet.gqcnn import GQCNN, candidate_inputs, count_parameters, predict_quality
+from pipeline.dexnet.ood import (
+    OOD_FIELDS, check_ood_config, init_ood_worker, load_ood, ood_shard, ood_shard_from_file,
+    plan_ood_tasks,
+)
 from pipeline.dexnet.planner import (
-    MODEL_FILE, DexNetPlanner, crop_config, gqcnn_config, sampler_config, workspace,
+    BASELINE_VARIANTS, MODEL_FILE, OOD_MODEL_FILE, DexNetPlanner, crop_config, gqcnn_config,
+    sampler_config, workspace,
 )
 from pipeline.dexnet.sampling import Candidates, point_cloud_image, sample_candidates
 from pipeline.executor import map_shards, resolve_workers
@@ -73,9 +84,17 @@ SECTIONS = ("seed", "camera", "bin", "boxes", "physics", "hand", "surfaces", "su
 NOT_AFFECTING_RESULT = ("baseline.generate_version", "baseline.train_version",
                         "baseline.workers", "baseline.force", "baseline.log_samples")
 OURS = "dcnn"
-PLANNER_NAMES = {OURS: "Ours (DCNN, two cups)", "gqcnn": "Dex-Net-style GQ-CNN + CEM",
+OOD = "gqcnn_ood"  # the GQ-CNN trained on heaps of other objects (``objects``, ``baseline.ood``)
+PLANNER_NAMES = {OURS: "Ours (DCNN, two cups)",
+                 "gqcnn": "Dex-Net-style GQ-CNN + CEM, trained on the box heaps",
+                 OOD: "Dex-Net-style GQ-CNN + CEM, trained on non-box objects",
                  "planarity": "Dex-Net-style planarity + CEM"}
-PLANNER_COLORS = {OURS: (60, 120, 255), "gqcnn": (255, 80, 40), "planarity": (255, 200, 0)}
+PLANNER_COLORS = {OURS: (60, 120, 255), "gqcnn": (255, 80, 40), OOD: (200, 40, 200),
+                  "planarity": (255, 200, 0)}
+# What each trained variant learned from, in the manifest's Table 2 rows.
+TRAINED_ON = {"gqcnn": "box heaps (this project's generation artifact)",
+              OOD: "heaps of random convex non-box objects (conf/objects/)",
+              "planarity": "nothing (analytic)"}
 EVAL_SEED = 11  # the CEM's generator for test image i: (seed, EVAL_SEED, i)
 LABEL_SEED = 5  # candidate sampling and robustness for a scene: (seed, LABEL_SEED, split, index)
 
@@ -94,11 +113,6 @@ CANDIDATE_FIELDS = {
 
 # --------------------------------------------------------------------------------------------
 # Candidate labels
-
-
-def gravity_in_camera(T_world_cam: np.ndarray) -> np.ndarray:
-    """World gravity direction (0, 0, −1) in the camera frame: (3,) unit vector."""
-    return np.asarray(T_world_cam, np.float64)[:3, :3].T @ np.array([0.0, 0.0, -1.0])
 
 
 def label_scene_candidates(scene: Scene, cfg, count: int) -> dict[str, np.ndarray]:
@@ -155,10 +169,28 @@ def label_shard(task: CandidateTask) -> dict:
     arrays = {k: np.concatenate(v) for k, v in cols.items()}
     Path(task.out_path).parent.mkdir(parents=True, exist_ok=True)
     write_npz(Path(task.out_path), arrays)
+    return _label_summary(task, arrays)
+
+
+def _label_summary(task: CandidateTask, arrays: dict) -> dict:
     return {"split": task.split, "scenes": task.count, "candidates": int(len(arrays["label"])),
             "positives": int(arrays["label"].sum()),
             "reasons": np.bincount(arrays["reason"].astype(np.int64),
                                    minlength=len(REASONS)).tolist()}
+
+
+def label_shard_from_file(task: CandidateTask) -> dict | None:
+    """The summary of a candidate shard an interrupted run already wrote (None: redo it)."""
+    if not Path(task.out_path).is_file():
+        return None
+    try:
+        arrays = read_npz(Path(task.out_path))
+        idx = arrays["scene_index"]
+        ok = set(arrays) == set(CANDIDATE_FIELDS) and bool(
+            np.all((idx >= task.first) & (idx < task.first + task.count)))
+        return _label_summary(task, arrays) if ok else None
+    except Exception:  # noqa: BLE001 - any unusable file is simply computed again
+        return None
 
 
 def plan_tasks(gen_dir: Path, out_dir: Path, max_train_scenes: int) -> list[CandidateTask]:
@@ -228,8 +260,10 @@ def _evaluate(net: GQCNN, crops, poses, labels) -> dict:
             "positive_rate": float(np.mean(labels))}
 
 
-def train_gqcnn(cfg, train_inputs, val_inputs, progress: bool) -> tuple[GQCNN, dict]:
-    """Adam on binary cross-entropy; data order of epoch e from (seed, e). Returns net, history."""
+def train_gqcnn(cfg, train_inputs, val_inputs, progress: bool,
+                name: str = "gqcnn") -> tuple[GQCNN, dict]:
+    """Adam on binary cross-entropy; data order of epoch e from (seed, e). Returns net, history.
+    ``name``: the variant, for the progress bar."""
     from tqdm import tqdm
 
     b = cfg.baseline
@@ -248,7 +282,7 @@ def train_gqcnn(cfg, train_inputs, val_inputs, progress: bool) -> tuple[GQCNN, d
         order = torch.randperm(n, generator=gen).numpy()
         total = 0.0
         steps = range(0, n, int(b.batch_size))
-        for start in tqdm(steps, desc=f"{STAGE} epoch {epoch + 1}/{b.epochs}", unit="batch",
+        for start in tqdm(steps, desc=f"{STAGE} {name} epoch {epoch + 1}/{b.epochs}", unit="batch",
                           disable=not progress, leave=False):
             idx = np.sort(order[start:start + int(b.batch_size)])
             x = torch.from_numpy(crops[idx].astype(np.float32))
@@ -279,8 +313,7 @@ def make_planners(cfg, gen: SceneDataset, model_dir: Path, train_dir: Path | Non
         dcnn = Planner.load(train_dir, device="cpu")
         planners[OURS] = lambda depth, intr, i: dcnn.plan(depth, intr)
     for variant in cfg.baseline.variants:
-        dex = DexNetPlanner.from_config(cfg, variant, gen.T_world_cam,
-                                        model_dir if variant == "gqcnn" else None)
+        dex = DexNetPlanner.for_variant(cfg, variant, gen.T_world_cam, model_dir)
 
         def plan(depth, intr, i, dex=dex):
             return dex.plan(depth, intr, rng=np.random.default_rng([int(cfg.seed), EVAL_SEED, i]))
@@ -443,6 +476,62 @@ def _log_table2_samples(log: StageLog, cfg, gen_dir: Path, model_dir: Path, resu
 # The stage
 
 
+def _make_ood_data(run: StageRun, cfg_obj, gen_dir: Path, tasks: list, done: dict,
+                   workers: int, progress: bool) -> None:
+    """The object heaps' labelled candidates (``ood/<split>-<shard>.npz``, ``ood.json``), with
+    the generation artifact's sensor model and depth unit; their counts into the manifest."""
+    from types import SimpleNamespace
+
+    meta = SceneDataset(gen_dir, "test")
+    sensor = SimpleNamespace(**meta.sensor)  # the box heaps' sensor (camera.json)
+    files = {"splits": {"train": [], "val": []}, "fields": OOD_FIELDS, "reasons": list(REASONS)}
+    for t in tasks:
+        files["splits"][t.split].append(Path(t.path).relative_to(run.work_dir).as_posix())
+    (run.work_dir / "ood.json").write_text(json.dumps(files, indent=2) + "\n")
+    t0 = time.perf_counter()
+    todo = [t for t in tasks if t.path not in done]
+    done.update(zip([t.path for t in todo], map_shards(
+        ood_shard, todo, init=init_ood_worker, initargs=(cfg_obj, sensor, meta.depth_unit),
+        workers=workers, desc=f"{STAGE} object heaps", progress=progress,
+        executor=cfg_obj.executor)))
+    seconds = time.perf_counter() - t0
+    run.timings.update({"ood_s": round(seconds, 3), "ood_scenes_per_s": round(
+        sum(t.count for t in todo) / max(seconds, 1e-9), 3)})
+    out = {}
+    for split in ("train", "val"):
+        ss = [done[t.path] for t in tasks if t.split == split]
+        reasons = np.sum([s["reasons"] for s in ss], axis=0) if ss else np.zeros(len(REASONS))
+        out[split] = {k: sum(s[k] for s in ss)
+                      for k in ("scenes", "objects", "not_settled", "candidates", "positives")}
+        out[split]["contact_outcomes"] = {REASONS[k]: int(c) for k, c in enumerate(reasons)}
+    run.metrics["ood_candidate_labels"] = out
+
+
+def _train_ood(run: StageRun, cfg, tasks: list, box_test: tuple, progress: bool) -> None:
+    """The GQ-CNN of ``gqcnn``, trained as it is on the object heaps' candidates instead
+    (``gqcnn_ood.pt``); validated on the object heaps, tested on the box test split's."""
+    crop = crop_config(cfg)
+    inputs = {}
+    for split in ("train", "val"):
+        rows = load_ood([Path(t.path) for t in tasks if t.split == split])
+        inputs[split] = (rows.get("crop", np.zeros((0, 1, crop.size, crop.size), np.float16)),
+                         rows.get("pose", np.zeros((0, 2), np.float32)),
+                         rows.get("label", np.zeros(0, bool)).astype(bool))
+    if len(inputs["train"][2]) == 0:
+        raise ValueError("no candidates on the object heaps: check baseline.ood.num_scenes and "
+                         "objects.min_count (conf/objects/)")
+    net, history = train_gqcnn(cfg, inputs["train"], inputs["val"], progress, name=OOD)
+    torch.save({"network": dataclasses.asdict(net.cfg), "crop": dataclasses.asdict(crop),
+                "state_dict": net.state_dict()}, run.work_dir / OOD_MODEL_FILE)
+    run.timings.update({"gqcnn_ood_train_s": round(history["train_s"], 3),
+                        "gqcnn_ood_samples_per_s": round(history["samples_per_s"], 1)})
+    run.metrics[OOD] = {
+        "parameters": count_parameters(net), "train_samples": int(len(inputs["train"][2])),
+        "train_loss": [round(x, 6) for x in history["train_loss"]],
+        "val": [{k: round(v, 6) for k, v in e.items()} for e in history["val"]],
+        "box_test": {k: round(v, 6) for k, v in _evaluate(net, *box_test).items()}}
+
+
 def _train_artifact(cfg) -> Path | None:
     """The project's planner for Table 2, or None (``train_version=none``, or no artifact and
     ``latest`` asked for)."""
@@ -463,11 +552,15 @@ def _train_artifact(cfg) -> Path | None:
 
 def baseline(cfg: DictConfig) -> Path:
     """Label candidates, train the GQ-CNN, evaluate Table 2; returns the artifact folder."""
+    for variant in cfg.baseline.variants:
+        if variant not in BASELINE_VARIANTS:
+            raise ValueError(f"baseline.variants has {variant!r}: choose from "
+                             f"{', '.join(BASELINE_VARIANTS)}")
+    with_ood = OOD in cfg.baseline.variants
+    if with_ood:
+        check_ood_config(cfg)
     gen_dir = resolve_artifact(data_root(cfg), STAGE_UPSTREAM, cfg.baseline.generate_version,
                                verify=True, key="baseline.generate_version")
-    for variant in cfg.baseline.variants:
-        if variant not in PLANNER_NAMES or variant == OURS:
-            raise ValueError(f"baseline.variants has {variant!r}: choose from gqcnn, planarity")
     train_dir = _train_artifact(cfg)
     upstream = {"generate": gen_dir.name}
     if train_dir is not None:
@@ -475,7 +568,10 @@ def baseline(cfg: DictConfig) -> Path:
         trained_on = load_manifest(train_dir)["upstream"].get("label")
         if trained_on is not None:
             upstream["train_label"] = trained_on
-    config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
+    # the object heaps' settings are part of the version only when their variant is run
+    sections = SECTIONS + (("objects",) if with_ood else ())
+    ignore = NOT_AFFECTING_RESULT + (() if with_ood else ("baseline.ood",))
+    config = stage_config(cfg, sections, ignore)
     version = compute_version(STAGE, config, upstream=upstream)
     cfg_obj = OmegaConf.to_object(cfg)
     workers = resolve_workers(cfg_obj.baseline.workers, cfg_obj.executor)
@@ -483,18 +579,29 @@ def baseline(cfg: DictConfig) -> Path:
 
     def body(run: StageRun) -> None:
         tasks = plan_tasks(gen_dir, run.work_dir, int(cfg.baseline.max_train_scenes))
+        ood_tasks = plan_ood_tasks(cfg.baseline.ood, run.work_dir / "ood") if with_ood else []
+        # an interrupted run's finished shards (both kinds) are kept; everything else is redone
+        readers = {t.out_path: (label_shard_from_file, t) for t in tasks}
+        readers.update({t.path: (ood_shard_from_file, t) for t in ood_tasks})
+        done = run.finished_shards(list(readers), list(readers),
+                                   lambda path: readers[path][0](readers[path][1]),
+                                   lambda path: path)
+        if run.resumed:
+            run.timings["shards_resumed"] = len(done)
         meta = {"splits": {s: [] for s in SPLITS}, "fields": CANDIDATE_FIELDS,
                 "reasons": list(REASONS)}
         for t in tasks:
             meta["splits"][t.split].append(Path(t.out_path).relative_to(run.work_dir).as_posix())
         (run.work_dir / "candidates.json").write_text(json.dumps(meta, indent=2) + "\n")
         t0 = time.perf_counter()
-        summaries = list(map_shards(label_shard, tasks, init=_init_worker,
-                                    initargs=(cfg_obj, str(gen_dir)), workers=workers,
-                                    desc=f"{STAGE} labels", progress=progress,
-                                    executor=cfg_obj.executor))
+        todo = [t for t in tasks if t.out_path not in done]
+        done.update(zip([t.out_path for t in todo], map_shards(
+            label_shard, todo, init=_init_worker, initargs=(cfg_obj, str(gen_dir)),
+            workers=workers, desc=f"{STAGE} labels", progress=progress,
+            executor=cfg_obj.executor)))
+        summaries = [done[t.out_path] for t in tasks]
         label_s = time.perf_counter() - t0
-        n_scenes = sum(t.count for t in tasks)
+        n_scenes = sum(t.count for t in todo)
         run.timings.update({"label_s": round(label_s, 3), "label_workers": workers,
                             "label_scenes_per_s": round(n_scenes / max(label_s, 1e-9), 3)})
         labels_metrics = {}
@@ -507,6 +614,8 @@ def baseline(cfg: DictConfig) -> Path:
                 "positives": sum(s["positives"] for s in ss),
                 "contact_outcomes": {REASONS[k]: int(c) for k, c in enumerate(reasons)}}
         run.metrics["candidate_labels"] = labels_metrics
+        if with_ood:
+            _make_ood_data(run, cfg_obj, gen_dir, ood_tasks, done, workers, progress)
 
         crop = crop_config(cfg)
         inputs = {}
@@ -528,6 +637,8 @@ def baseline(cfg: DictConfig) -> Path:
             "train_loss": [round(x, 6) for x in history["train_loss"]],
             "val": [{k: round(v, 6) for k, v in e.items()} for e in history["val"]],
             "test": {k: round(v, 6) for k, v in _evaluate(net, *inputs["test"]).items()}}
+        if with_ood:
+            _train_ood(run, cfg, ood_tasks, inputs["test"], progress)
         del inputs
 
         result = evaluate_table2(cfg, gen_dir, run.work_dir, train_dir, progress)
@@ -543,6 +654,7 @@ def baseline(cfg: DictConfig) -> Path:
                              else np.zeros((0, 2)))
         write_npz(run.work_dir / "chosen.npz", chosen)
         run.metrics["table2"] = {"radius_px": radius, "rows": rows,
+                                 "trained_on": {k: TRAINED_ON[k] for k in cfg.baseline.variants},
                                  "paper": {"within_30px": PAPER_TABLE2,
                                            "radius_px": PAPER_RADIUS_PX}}
         run.timings["planning_ms_per_image"] = {
@@ -560,7 +672,7 @@ def baseline(cfg: DictConfig) -> Path:
                                 int(cfg.baseline.log_samples))
 
     return run_stage(data_root(cfg), STAGE, version, config, upstream, body,
-                     seed=cfg_obj.seed, force=cfg_obj.baseline.force)
+                     seed=cfg_obj.seed, force=cfg_obj.baseline.force, resumable=True)
 
 
 STAGE_UPSTREAM = "generate"

@@ -116,9 +116,8 @@ def make_planner(cfg, name: str, train_dir: str | None, baseline_dir: str | None
     if name == "dexnet":
         from pipeline.dexnet.planner import DexNetPlanner
 
-        variant = str(cfg.evaluate.dexnet_variant)
-        dex = DexNetPlanner.from_config(cfg, variant, T_home,
-                                        baseline_dir if variant == "gqcnn" else None)
+        dex = DexNetPlanner.for_variant(cfg, str(cfg.evaluate.dexnet_variant), T_home,
+                                        baseline_dir)
         k = int(cfg.evaluate.max_candidates_checked) if bool(cfg.evaluate.check_reachability) \
             else 1
         return lambda depth, intr, rng: dex.plan(depth, intr, rng=rng, max_grasps=k)
@@ -277,9 +276,20 @@ def evaluate(cfg: DictConfig) -> Path:
         train_dir = resolve_artifact(Path(cfg.paths.models), "train", cfg.evaluate.train_version,
                                      verify=True, key="evaluate.train_version")
         upstream["train"] = train_dir.name
-    if "dexnet" in planners and str(cfg.evaluate.dexnet_variant) == "gqcnn":
+    from pipeline.dexnet.planner import BASELINE_VARIANTS
+
+    if "dexnet" in planners and str(cfg.evaluate.dexnet_variant) not in BASELINE_VARIANTS:
+        raise ValueError(f"evaluate.dexnet_variant={cfg.evaluate.dexnet_variant}: choose from "
+                         f"{', '.join(BASELINE_VARIANTS)}")
+    if "dexnet" in planners and BASELINE_VARIANTS[str(cfg.evaluate.dexnet_variant)][1]:
         baseline_dir = resolve_artifact(data_root(cfg), "baseline", cfg.evaluate.baseline_version,
                                         verify=True, key="evaluate.baseline_version")
+        model_file = BASELINE_VARIANTS[str(cfg.evaluate.dexnet_variant)][1]
+        if not (baseline_dir / model_file).is_file():
+            raise ValueError(f"baseline artifact {baseline_dir.name} has no {model_file} (its "
+                             f"baseline.variants left {cfg.evaluate.dexnet_variant} out): run "
+                             f"`make baseline` with {cfg.evaluate.dexnet_variant} in "
+                             "baseline.variants, or pass another evaluate.baseline_version")
         upstream["baseline"] = baseline_dir.name
     config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
     version = compute_version(STAGE, config, upstream)

@@ -83,3 +83,23 @@ def test_ablation_table_by_hand():
     assert md[2] == ("| oracle | no_gate | evaluate.check_reachability=false | 90.0 % | 10 | "
                      "9/12 | 75.0 % | 990.5 | 1 | 0 | 0 | 0 | 0 | 2 |")
     assert md[3].startswith("| oracle | all_off | evaluate.check_reachability=false | — | 0 |")
+
+
+def test_table2_shows_each_gqcnn_with_what_it_was_trained_on():
+    from pipeline.baseline import PLANNER_NAMES
+    from pipeline.report.baseline import render_baseline
+
+    rows = [{"planner": k, "name": PLANNER_NAMES[k], "images": 4, "no_grasp": 0,
+             "within_30px": 0.5, "median_distance_px": 20.0} for k in ("gqcnn", "gqcnn_ood")]
+    info = ArtifactInfo(Path("x"), {"metrics": {
+        "table2": {"radius_px": 30.0, "rows": rows,
+                   "paper": {"within_30px": {"dexnet4": 0.5888, "ours": 0.7916},
+                             "radius_px": 30.0}},
+        "gqcnn_ood": {"box_test": {"accuracy": 0.75, "precision": 0.5, "recall": 0.25}},
+        "ood_candidate_labels": {"train": {"scenes": 3, "objects": 30, "candidates": 96}}}})
+    t = table2_table(info)
+    md = t.markdown()
+    assert "| this reproduction | Dex-Net-style GQ-CNN + CEM, trained on the box heaps |" in md
+    assert "| this reproduction | Dex-Net-style GQ-CNN + CEM, trained on non-box objects |" in md
+    text = "\n".join(render_baseline(info, {"table2_centre_distance": t}, {}))
+    assert "3 heaps of 30 random convex" in text and "accuracy 75.0 %" in text

@@ -150,3 +150,9 @@ def quat_from_axes(x, y, z) -> np.ndarray:
     if np.linalg.det(R) < 0:
         R[:, 2] *= -1
     return quat_from_matrix(R)
+
+
+def gravity_in_camera(T_world_cam: np.ndarray) -> np.ndarray:
+    """World gravity direction (0, 0, -1) in the camera frame of pose ``T_world_cam`` (4, 4):
+    (3,) unit vector."""
+    return np.asarray(T_world_cam, np.float64)[:3, :3].T @ np.array([0.0, 0.0, -1.0])

@@ -89,6 +89,41 @@ class BoxesConfig:
 
 
 @dataclass
+class ObjectsConfig:
+    """Random convex non-box objects (``conf/objects/``): the out-of-domain training heaps of the
+    Dex-Net-style baseline. The shape keys are ``pipeline.simulation.objects.ObjectSetSpec``'s
+    fields (ranges are [low, high], m); the rest are the heap's, as ``BoxesConfig``'s."""
+
+    name: str = MISSING
+    families: List[str] = MISSING  # cylinder | prism | hull, each equally likely
+    cylinder_radius: List[float] = MISSING
+    cylinder_length: List[float] = MISSING
+    cylinder_sections: int = MISSING
+    prism_sides: List[int] = MISSING
+    prism_radius: List[float] = MISSING
+    prism_length: List[float] = MISSING
+    prism_regular_share: float = MISSING
+    prism_jitter: float = MISSING
+    prism_squeeze: List[float] = MISSING
+    hull_semi_axis: List[float] = MISSING
+    hull_points: List[int] = MISSING
+    density: float = MISSING  # kg/m^3
+    lateral_friction: float = MISSING
+    min_count: int = MISSING  # objects per heap, uniform, inclusive
+    max_count: int = MISSING
+
+
+@dataclass
+class BaselineOODConfig:
+    """The out-of-domain GQ-CNN's training heaps (``baseline.ood``; variant ``gqcnn_ood``)."""
+
+    num_scenes: int = MISSING  # training heaps of ``objects``
+    num_val_scenes: int = MISSING  # validation heaps of ``objects``
+    scenes_per_shard: int = MISSING
+    candidates_per_scene: int = MISSING
+
+
+@dataclass
 class PhysicsConfig:
     """pybullet settings and the rest criterion (see docs/simulation.md)."""
 
@@ -355,6 +390,7 @@ class BaselineConfig:
     weight_decay: float = MISSING
     num_threads: int = MISSING
     variants: List[str] = MISSING
+    ood: BaselineOODConfig = MISSING  # the gqcnn_ood variant's training heaps (``objects``)
     max_eval_images: int = MISSING  # 0 = the whole test split
     table2_radius_px: float = MISSING
     curve_min_px: int = MISSING
@@ -418,7 +454,7 @@ class EvaluateConfig:
     """The closed-loop evaluation stage (``pipeline.evaluate``)."""
 
     planners: List[str] = MISSING
-    dexnet_variant: str = MISSING  # gqcnn | planarity
+    dexnet_variant: str = MISSING  # gqcnn | gqcnn_ood | planarity (a baseline variant)
     dexnet_pattern: str = MISSING  # the cup that serves Dex-Net's single suction point
     dcnn_threshold: Optional[float] = MISSING  # th of Eq. 3 for the closed loop; None: the model's
     stop_on_box_contact: bool = MISSING  # True: touching any box but the target fails the attempt
@@ -552,6 +588,7 @@ class PipelineConfig:
     camera: CameraConfig = field(default_factory=CameraConfig)
     bin: BinConfig = field(default_factory=BinConfig)
     boxes: BoxesConfig = field(default_factory=BoxesConfig)
+    objects: ObjectsConfig = field(default_factory=ObjectsConfig)
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
     sensor: SensorConfig = field(default_factory=SensorConfig)
     depth_filter: DepthFilterConfig = field(default_factory=DepthFilterConfig)

@@ -53,6 +53,12 @@ from pipeline.planner.planner import ModelFileError, build_from_blob, read_model
 
 VARIANTS = ("gqcnn", "planarity")
 MODEL_FILE = "gqcnn.pt"
+# The baseline stage's planners (``baseline.variants``, ``evaluate.dexnet_variant``): the quality
+# each scores with and, for a trained one, its file in the baseline artifact. ``gqcnn``: trained
+# on the box heaps; ``gqcnn_ood``: the same network trained on heaps of other objects.
+OOD_MODEL_FILE = "gqcnn_ood.pt"
+BASELINE_VARIANTS = {"gqcnn": ("gqcnn", MODEL_FILE), "gqcnn_ood": ("gqcnn", OOD_MODEL_FILE),
+                     "planarity": ("planarity", None)}
 MODEL_KEYS = ("network", "crop", "state_dict")
 REBUILD_FIX = ("re-run the baseline stage with `make baseline` (`python -m pipeline.baseline`), "
                "or pass a data/baseline/<version> folder made by this version of the pipeline")
@@ -186,6 +192,21 @@ class DexNetPlanner:
             net, crop = load_gqcnn(model_dir)
         return cls(variant, workspace(cfg, T_world_cam), sampler_config(cfg), cem_config(cfg),
                    planarity_config(cfg), crop, net, seed=int(cfg.seed))
+
+    @classmethod
+    def for_variant(cls, cfg, variant: str, T_world_cam: np.ndarray,
+                    baseline_dir: Path | str | None = None) -> "DexNetPlanner":
+        """The planner of a ``BASELINE_VARIANTS`` name, its GQ-CNN (if any) read from the
+        baseline artifact folder ``baseline_dir``."""
+        if variant not in BASELINE_VARIANTS:
+            raise ValueError(f"unknown Dex-Net-style planner {variant!r}: choose one of "
+                             f"{', '.join(BASELINE_VARIANTS)}")
+        quality, model_file = BASELINE_VARIANTS[variant]
+        if model_file is None:
+            return cls.from_config(cfg, quality, T_world_cam)
+        if baseline_dir is None:
+            raise ValueError(f"the {variant} planner needs baseline_dir=<baseline artifact folder>")
+        return cls.from_config(cfg, quality, T_world_cam, Path(baseline_dir) / model_file)
 
     def score(self, depth_m: np.ndarray, cloud: PointCloudImage, cands: Candidates) -> np.ndarray:
         """Quality of each candidate: (N,) in [0, 1]."""

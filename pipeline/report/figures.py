@@ -223,7 +223,8 @@ def figure_pr_curve(curve: dict, path: Path, paper: dict | None = None) -> None:
 
 PLANNER_STYLE = {  # Table 2 / Fig. 10 planners: (colour, marker, legend label)
     "dcnn": ("tab:blue", "o", "ours (DCNN)"),
-    "gqcnn": ("tab:red", "X", "Dex-Net-style GQ-CNN + CEM"),
+    "gqcnn": ("tab:red", "X", "Dex-Net-style GQ-CNN + CEM (box heaps)"),
+    "gqcnn_ood": ("tab:purple", "P", "Dex-Net-style GQ-CNN + CEM (non-box objects)"),
     "planarity": ("tab:orange", "s", "Dex-Net-style planarity + CEM"),
 }
 

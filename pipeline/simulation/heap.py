@@ -120,7 +120,8 @@ def _half_extents(client: int, body_ids: list[int]) -> np.ndarray:
                      for b in body_ids], np.float64).reshape(-1, 3) / 2.0
 
 
-def settle(client: int, body_ids: list[int], physics_cfg, max_steps: int) -> tuple[int, bool]:
+def settle(client: int, body_ids: list[int], physics_cfg, max_steps: int,
+           half_extents: np.ndarray | None = None) -> tuple[int, bool]:
     """Step until the boxes ``body_ids`` are at rest: over the last ``rest_window_steps``, no
     corner of any box has been farther than ``rest_corner_displacement`` from where it is now
     (corners sampled every ``rest_check_interval_steps`` steps; corners, not centres, so that a
@@ -130,6 +131,10 @@ def settle(client: int, body_ids: list[int], physics_cfg, max_steps: int) -> tup
     creeping passes a speed threshold at the moment it is checked, but not a displacement
     test over a quarter of a second.
 
+    ``half_extents``: (n, 3) half edge lengths of the box whose corners are watched, per body
+    (default: each body's box collision shape); for bodies that are not boxes, any box fixed to
+    them (``pipeline.simulation.object_heap`` passes each object's bounding box).
+
     Returns (steps taken, whether rest was reached within ``max_steps``).
     """
     every = int(physics_cfg.rest_check_interval_steps)
@@ -137,7 +142,8 @@ def settle(client: int, body_ids: list[int], physics_cfg, max_steps: int) -> tup
     eps2 = float(physics_cfg.rest_corner_displacement) ** 2
     if not body_ids:
         return 0, True
-    half = _half_extents(client, body_ids)
+    half = (_half_extents(client, body_ids) if half_extents is None
+            else np.asarray(half_extents, np.float64).reshape(-1, 3))
     history = [box_corners(client, body_ids, half)]
     steps = 0
     while steps < max_steps:
