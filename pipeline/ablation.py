@@ -68,6 +68,7 @@ def run_variants(cfg: DictConfig, base: list[str]) -> list[dict]:
                 t3 = json.loads((out / "manifest.json").read_text())["metrics"]["table3"]
                 row = next(r for r in t3 if r["planner"] == planner)
                 rows.append({"planner": planner, "variant": str(v.name),
+                             "meaning": str(v.meaning),
                              "overrides": " ".join(overrides) or "-",
                              **{k: _finite(row.get(k)) for k in ROW_KEYS},
                              **{k: val for k, val in row.items()

@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -105,13 +104,12 @@ def make_planner(cfg, name: str, train_dir: str | None, baseline_dir: str | None
     if name == "dcnn":
         from pipeline.planner.planner import Planner
 
+        from pipeline.planner.planner import ranking_config
+
         net = Planner.load(train_dir, device="cpu")
         th = cfg.evaluate.dcnn_threshold
-        if th is not None:
-            net.ranking = dataclasses.replace(net.ranking, threshold=float(th))
-        net.ranking = dataclasses.replace(
-            net.ranking, policy=str(cfg.evaluate.ranking_policy),
-            inclination_tie=math.radians(float(cfg.evaluate.inclination_tie_deg)))
+        # the composed train.ranking (policy included), with the model's th unless overridden
+        net.ranking = ranking_config(cfg, net.ranking.threshold if th is None else float(th))
         return lambda depth, intr, rng: net.plan(depth, intr)
     if name == "dexnet":
         from pipeline.dexnet.planner import DexNetPlanner

@@ -93,7 +93,8 @@ def test_a_retry_after_a_failure_differs(runner):
     (body,) = list(runner.cell.boxes)
     pos, quat = runner.cell.box_pose(body)
     P = np.array([0.0, 0.0, 0.052])
-    failed = [{"body": body, "pattern": "B", "point": P, "position": pos, "quat": quat}]
+    failed = [runner.failure_record(body, "B", P)]
+    assert failed[0]["neighbours"] == {}  # the box is alone in the bin
     assert runner._repeats_failure(body, "B", P + [0.01, 0, 0], failed)  # 1 cm: same plan
     assert not runner._repeats_failure(body, "L", P, failed)
     assert not runner._repeats_failure(body, "B", P + [0.05, 0, 0], failed)
@@ -116,6 +117,45 @@ def test_a_retry_after_a_failure_differs(runner):
     assert runner.select(frame, [cand], failed)[:2] == (cand, "B")
 
 
+def _add_cube(runner, xy):
+    """A 6 cm cube resting on the bin floor at ``xy`` (world, m), one of the cell's boxes."""
+    cell = runner.cell
+    shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=[0.03] * 3, physicsClientId=cell.client)
+    body = p.createMultiBody(0.1, shape, basePosition=[xy[0], xy[1], 0.03],
+                             physicsClientId=cell.client)
+    cell.boxes[body] = {"type": "cube", "size": [0.06, 0.06, 0.06]}
+    return body
+
+
+def test_a_retry_is_new_once_the_heap_around_it_changes(runner):
+    """The failed plan on the medium box at the bin centre (P = its top face centre) stays
+    skipped while its surroundings are as they were; a cube whose centre was 0.10 m from P
+    (< retry_neighbour_m = 0.15 m) being picked, or moving 1 cm, makes it a new plan; a cube
+    0.17 m away (> 0.15 m) does not count, unless it comes nearer."""
+    (body,) = list(runner.cell.boxes)
+    P = np.array([0.0, 0.0, 0.052])
+    near = _add_cube(runner, [0.0, 0.1])  # |(0, 0.1, 0.03) - P| = 0.102 m
+    far = _add_cube(runner, [0.17, 0.0])  # |(0.17, 0, 0.03) - P| = 0.171 m
+    failed = [runner.failure_record(body, "B", P)]
+    assert set(failed[0]["neighbours"]) == {near}
+    assert runner._repeats_failure(body, "B", P, failed)
+    runner.cell.remove_box(far)  # picked, but out of reach of the failed plan
+    assert runner._repeats_failure(body, "B", P, failed)
+    p.resetBasePositionAndOrientation(near, [0.0, 0.11, 0.03], [0, 0, 0, 1],
+                                      physicsClientId=runner.cell.client)
+    assert not runner._repeats_failure(body, "B", P, failed)  # the neighbour moved by 1 cm
+    p.resetBasePositionAndOrientation(near, [0.0, 0.1, 0.03], [0, 0, 0, 1],
+                                      physicsClientId=runner.cell.client)
+    assert runner._repeats_failure(body, "B", P, failed)  # back where it was
+    runner.cell.remove_box(near)  # the neighbour was picked
+    assert not runner._repeats_failure(body, "B", P, failed)
+    # a failure recorded with nothing near; then a box slides within 0.15 m: a new plan
+    failed = [runner.failure_record(body, "B", P)]
+    assert runner._repeats_failure(body, "B", P, failed)
+    _add_cube(runner, [0.12, 0.0])  # 0.121 m from P
+    assert not runner._repeats_failure(body, "B", P, failed)
+
+
 def test_single_point_tries_the_other_cup(runner):
     """A Dex-Net-style point (no class) gets ``dexnet_pattern`` (L) first, then R; when L was
     the failed plan, R is next."""
@@ -125,9 +165,7 @@ def test_single_point_tries_the_other_cup(runner):
     cand = SimpleNamespace(u=u, v=v, grasp_class=None, point_cam=point_cam)
     assert runner._patterns(cand) == ["L", "R"]
     assert runner.select(frame, [cand], [])[:2] == (cand, "L")
-    pos, quat = runner.cell.box_pose(body)
-    failed = [{"body": body, "pattern": "L", "point": np.array([0, 0, 0.052]), "position": pos,
-               "quat": quat}]
+    failed = [runner.failure_record(body, "L", np.array([0, 0, 0.052]))]
     assert runner.select(frame, [cand], failed)[:2] == (cand, "R")
 
 
@@ -146,9 +184,7 @@ def test_a_b_that_does_not_fit_is_tried_with_one_cup(cube_runner):
     rejected = {}
     assert runner.select(frame, [cand], [], rejected)[:2] == (cand, "L")
     assert rejected == {"hand_fit": 1}
-    pos, quat = runner.cell.box_pose(body)
-    failed = [{"body": body, "pattern": "L", "point": np.array([0, 0, 0.07]), "position": pos,
-               "quat": quat}]
+    failed = [runner.failure_record(body, "L", np.array([0, 0, 0.07]))]
     assert runner.select(frame, [cand], failed)[:2] == (cand, "R")
     # an L or R candidate has no fallback
     assert runner._patterns(SimpleNamespace(u=u, v=v, grasp_class=GraspClass.L)) == ["L"]

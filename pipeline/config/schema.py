@@ -283,7 +283,7 @@ class RankingSchema:
     phi_switch_deg: float = MISSING  # Eq. 7: J_inclination from this inclination on
     normal_half_window: int = MISSING  # h: the normal is averaged over (2h + 1)^2 pixels
     max_depth_jump: float = MISSING  # m: a larger depth step to a neighbour is an object edge
-    policy: str = MISSING  # "paper" | "height_tiebreak"
+    policy: str = MISSING  # "paper" (Eq. 7) | "height_tiebreak" (Sec. 8.4's proposed fix)
     inclination_tie_deg: float = MISSING  # height_tiebreak: inclinations closer than this tie
 
 
@@ -464,11 +464,10 @@ class EvaluateConfig:
     retry_same_point_m: float = MISSING
     retry_moved_m: float = MISSING
     retry_moved_deg: float = MISSING
+    retry_neighbour_m: float = MISSING  # boxes this near the failed point are its surroundings
     face_split_m: float = MISSING  # split the home region at other planner points this far away
     check_hand_fit: bool = MISSING  # the run-time check tests the pattern's cups on the surface
     single_cup_fallback: bool = MISSING  # a rejected B is tried with L, then R
-    ranking_policy: str = MISSING  # "paper" (Eq. 7) | "height_tiebreak" (Sec. 8.4's proposed fix)
-    inclination_tie_deg: float = MISSING  # height_tiebreak: inclinations closer than this tie
     min_area_ratio: float = MISSING  # 0: off (paper); 1.2: Sec. 8.4's surface-area safety check
     train_version: str = MISSING
     baseline_version: str = MISSING
@@ -522,6 +521,7 @@ class AblationVariant:
 
     name: str = MISSING
     overrides: List[str] = MISSING
+    meaning: str = MISSING  # what the row turns off, in the report's words
 
 
 @dataclass

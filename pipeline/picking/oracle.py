@@ -12,9 +12,6 @@ truth, so it never stands in for the DCNN's figures.
 
 from __future__ import annotations
 
-import dataclasses
-import math
-
 import numpy as np
 
 from pipeline.camera.geometry import Intrinsics, pose_matrix
@@ -39,9 +36,7 @@ class OraclePlanner:
 
         self.cfg, self.cell = cfg, cell
         self.robot = RobotChecker(cfg)
-        self.ranking = dataclasses.replace(
-            ranking_config(cfg, threshold=0.5), policy=str(cfg.evaluate.ranking_policy),
-            inclination_tie=math.radians(float(cfg.evaluate.inclination_tie_deg)))
+        self.ranking = ranking_config(cfg, threshold=0.5)
 
     def scene(self, frame: Frame, intr: Intrinsics) -> Scene:
         """The home frame as a labelled scene: ideal depth, instance mask, true box poses."""

@@ -316,12 +316,43 @@ class PickRunner:
                 reject(reason)
         return None
 
+    def failure_record(self, target: int, pattern: str, point: np.ndarray) -> dict:
+        """What ``_repeats_failure`` remembers of a failed plan: the box ``target`` (-1: none),
+        the ``pattern``, the target ``point`` (world, m), the box's pose (world position, xyzw
+        quaternion) and the poses of the other boxes whose centre lies within
+        ``evaluate.retry_neighbour_m`` of the point (``neighbours``: body → (position, quat))."""
+        pose = self.cell.box_pose(target) if target >= 0 else (np.zeros(3), np.zeros(4))
+        return {"body": target, "pattern": pattern, "point": np.asarray(point, float),
+                "position": pose[0], "quat": pose[1],
+                "neighbours": {b: self.cell.box_pose(b) for b in self._near(point, target)}}
+
+    def _near(self, point: np.ndarray, target: int) -> list[int]:
+        """The boxes other than ``target`` whose centre is within ``retry_neighbour_m`` of
+        ``point`` (world, m)."""
+        r = float(self.cfg.evaluate.retry_neighbour_m)
+        return [b for b in self.cell.boxes
+                if b != target and np.linalg.norm(self.cell.box_pose(b)[0] - point) < r]
+
+    def _moved(self, body: int, pose: tuple[np.ndarray, np.ndarray]) -> bool:
+        """Whether ``body`` is gone or has moved at least ``retry_moved_m`` or turned at least
+        ``retry_moved_deg`` since it was at ``pose`` (world position, xyzw quaternion)."""
+        ev = self.cfg.evaluate
+        if body not in self.cell.boxes:
+            return True
+        pos, quat = self.cell.box_pose(body)
+        moved = np.linalg.norm(pos - pose[0])
+        turn = 2.0 * math.degrees(math.acos(min(1.0, abs(float(np.dot(quat, pose[1]))))))
+        return moved >= float(ev.retry_moved_m) or turn >= float(ev.retry_moved_deg)
+
     def _repeats_failure(self, target: int, pattern: str, point: np.ndarray | None,
                          failed: list[dict]) -> bool:
         """With ``evaluate.retry_policy: skip_failed``: the same box, with the same pattern, within
-        ``retry_same_point_m`` of a failed attempt's point, while that box has moved less than
-        ``retry_moved_m`` and turned less than ``retry_moved_deg`` since the failure: the same
-        plan in the same heap, which would fail again."""
+        ``retry_same_point_m`` of a failed attempt's point (``failure_record``), while the heap
+        around it has not changed: that box has moved less than ``retry_moved_m`` and turned
+        less than ``retry_moved_deg`` since the failure, and so has every box whose centre was
+        within ``retry_neighbour_m`` of the point then (none has been picked or fallen out), and
+        no other box has come that near. The same plan in the same surroundings would fail
+        again; once a neighbour is gone or has moved, the plan is a new one."""
         ev = self.cfg.evaluate
         if str(ev.retry_policy) == "repeat" or point is None:
             return False
@@ -331,11 +362,13 @@ class PickRunner:
                 continue
             if target < 0 or target not in self.cell.boxes:
                 return True
-            pos, quat = self.cell.box_pose(target)
-            moved = np.linalg.norm(pos - f["position"])
-            turn = 2.0 * math.degrees(math.acos(min(1.0, abs(float(np.dot(quat, f["quat"]))))))
-            if moved < float(ev.retry_moved_m) and turn < float(ev.retry_moved_deg):
-                return True
+            if self._moved(target, (f["position"], f["quat"])):
+                continue
+            around = f["neighbours"]
+            if any(self._moved(b, pose) for b, pose in around.items()) or \
+                    set(self._near(f["point"], target)) - set(around):
+                continue
+            return True
         return False
 
     def _reachable(self, frame: Frame, cand, pattern: str, target: int, cands=()):
@@ -723,14 +756,13 @@ class PickRunner:
                 break
             cand, pattern, x_world, predicted, sites = chosen
             target, point = self._target_of(frame, cand)
-            pose = self.cell.box_pose(target) if target >= 0 else (np.zeros(3), np.zeros(4))
+            record = self.failure_record(target, pattern, point) if point is not None else None
             att = self.attempt(frame, cand, planning_s, trial, index, trace, pattern, x_world,
                                predicted, sites)
             attempts.append(att)
             if att.outcome != "success":
-                if point is not None:
-                    failed.append({"body": target, "pattern": pattern, "point": point,
-                                   "position": pose[0], "quat": pose[1]})
+                if record is not None:
+                    failed.append(record)
                 failures[att.target_body] = failures.get(att.target_body, 0) + 1
                 if failures[att.target_body] >= int(ev.max_failures_per_target):
                     end = "max_failures"

@@ -48,8 +48,8 @@ class RankingConfig:
     """How candidates are ranked: ``train.ranking`` (angles there in degrees), with D_ground
     (``pipeline.camera.geometry.ground_distance``) and th (the training stage's calibrated or
     fixed value) given by the caller; built by ``pipeline.planner.planner.ranking_config`` and
-    stored with the model. The closed loop replaces ``policy`` and ``inclination_tie`` by
-    ``evaluate.ranking_policy`` and ``evaluate.inclination_tie_deg``."""
+    stored with the model (Tables 1 and 2). The closed loop builds it again from the evaluate
+    stage's composed ``train.ranking``, with the model's th."""
 
     d_ground: float  # D_ground, camera-to-ground distance at the home pose, metres (Eq. 9)
     threshold: float  # th of Eq. 3 (the paper gives no value)

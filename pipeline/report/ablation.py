@@ -18,18 +18,6 @@ from pipeline.report.upstream import ArtifactInfo, resolve_upstream
 
 ABLATION_SECTION = "Ablation: what each execution extension contributes"
 ABLATION_NOT_RUN = "Ablation: not run yet (`make ablation`)."
-ABLATION_MEANING = {
-    "all_on": "every extension on (the defaults)",
-    "no_gate": "no run-time check: the best-ranked candidate is executed unchecked",
-    "no_path_check": "the check tests the grasp pose only, not the servo's path to it",
-    "approach_direct": "the paper's servo straight from home to d*",
-    "approach_pregrasp": "a pre-grasp on the surface normal instead of the lift",
-    "retry_repeat": "no memory of failed plans",
-    "paper_descriptor": "the paper's descriptor (fixed window tolerance, seed as it is, no "
-                        "tracking of the surface's normal)",
-    "paper_rotation": "the paper's axis rule only (no hand turned by 180° or 90°)",
-    "all_off": "all of the above off: the paper's execution",
-}
 
 
 class AblationInfo(ArtifactInfo):
@@ -71,6 +59,12 @@ def ablation_table(rows: list[dict]) -> Table:
                   "{}", "{}"], text_columns=3)
 
 
+def _meanings(rows: list[dict]) -> dict[str, str]:
+    """Each variant's ``meaning`` (``ablation.variants``, stored with its rows), in row order;
+    an artifact made before variants had one shows its overrides instead."""
+    return {r["variant"]: r.get("meaning") or f"`{r['overrides']}`" for r in rows}
+
+
 def render_ablation(info: AblationInfo | None, tables: dict[str, Table]) -> list[str]:
     """README lines of the ablation section."""
     out = [f"## {ABLATION_SECTION}", ""]
@@ -87,7 +81,7 @@ def render_ablation(info: AblationInfo | None, tables: dict[str, Table]) -> list
         f"{', '.join(str(t) for t in trials)}.",
         "",
         tables["ablation"].markdown(),
-        *[f"- *{k}*: {v}" for k, v in ABLATION_MEANING.items()],
+        *[f"- *{name}*: {meaning}" for name, meaning in _meanings(info.rows).items()],
         "",
         "CSV version: [tables/ablation.csv](tables/ablation.csv).",
         "",
