@@ -707,7 +707,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", type=int, default=60, help="scenes per throughput run")
     parser.add_argument("--only", choices=("all", "stages", "render", "planners", "closed-loop",
-                                           "executors", "training", "sensor"),
+                                           "executors", "training", "sensor", "ood"),
                         default="all", help="run one group of figures")
     parser.add_argument("--experiment", default="paper",
                         help="--only training: whose latest label artifact to load (paper)")
@@ -733,17 +733,17 @@ def main(argv: list[str] | None = None) -> int:
               f"{mem['train_images_per_s']:.2f} images/s)")
         print(json.dumps({k: round(v, 3) if isinstance(v, float) else v for k, v in mem.items()}))
         return 0
-    if args.only == "render":
-        results.update(render_group(cfg, args.scenes))
+    if args.only == "ood":  # the Dex-Net-style baseline's out-of-domain heaps (bench_ood.py)
+        from pipeline.bench_ood import main as ood_main
+        return ood_main(["--scenes", str(min(args.scenes, 8))])
+    if args.only in ("render", "executors"):
+        results.update(render_group(cfg, args.scenes) if args.only == "render"
+                       else executor_figures(args.scenes))
         print(json.dumps({k: round(v, 3) for k, v in results.items()}))
         return 0
     if args.only == "sensor":
         results.update(sensor_figures())
         print(json.dumps({k: round(v, 4) for k, v in results.items()}))
-        return 0
-    if args.only == "executors":
-        results.update(executor_figures(args.scenes))
-        print(json.dumps({k: round(v, 3) for k, v in results.items()}))
         return 0
     if args.only in ("planners", "closed-loop"):
         if args.only == "planners":
