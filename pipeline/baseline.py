@@ -60,7 +60,8 @@ from pipeline.cli import CONF_DIR, data_root, stage_main
 from pipeline.dataset.pixels import pixels_to_points
 from pipeline.dataset.scenes import SPLIT_CODES, SPLITS, Scene, SceneDataset
 from pipeline.dataset.storage import read_npz, write_npz
-from pipeline.dexnet.contact import REASONS, evaluate_contacts, robust_quality, suction_model_config
+from pipeline.dexnet.contact import (
+    LABELLED_CANDIDATE_FIELDS, REASONS, evaluate_contacts, robust_quality, suction_model_config)
 from pipeline.dexnet.gqcnn import GQCNN, candidate_inputs, count_parameters, predict_quality
 from pipeline.dexnet.ood import (
     OOD_FIELDS, check_ood_config, init_ood_worker, load_ood, ood_shard, ood_shard_from_file,
@@ -99,16 +100,8 @@ EVAL_SEED = 11  # the CEM's generator for test image i: (seed, EVAL_SEED, i)
 LABEL_SEED = 5  # candidate sampling and robustness for a scene: (seed, LABEL_SEED, split, index)
 
 # One row per labelled candidate in candidates/<split>-<shard>.npz:
-CANDIDATE_FIELDS = {
-    "scene_index": "(M,) int64 scene index within the split",
-    "uv": "(M, 2) int64 pixel (u, v)",
-    "point": "(M, 3) float64 contact point, camera frame, m",
-    "axis": "(M, 3) float64 approach axis (into the object), camera frame",
-    "depth": "(M,) float64 m", "angle": "(M,) float64 rad from the optical axis",
-    "quality": "(M,) float64 robust quality in [0, 1]",
-    "label": "(M,) bool quality >= suction.quality_threshold",
-    "reason": "(M,) int8 unperturbed contact outcome, index into reasons",
-}
+CANDIDATE_FIELDS = {"scene_index": "(M,) int64 scene index within the split",
+                    **LABELLED_CANDIDATE_FIELDS}
 
 
 # --------------------------------------------------------------------------------------------
@@ -476,6 +469,15 @@ def _log_table2_samples(log: StageLog, cfg, gen_dir: Path, model_dir: Path, resu
 # The stage
 
 
+def _write_index(run: StageRun, name: str, splits, fields: dict, tasks: list, path_of) -> None:
+    """``<name>`` in the artifact: each split's shard files (``path_of(task)``, relative to the
+    artifact), the fields of their rows and the contact model's reason codes."""
+    index = {"splits": {s: [] for s in splits}, "fields": fields, "reasons": list(REASONS)}
+    for t in tasks:
+        index["splits"][t.split].append(Path(path_of(t)).relative_to(run.work_dir).as_posix())
+    (run.work_dir / name).write_text(json.dumps(index, indent=2) + "\n")
+
+
 def _make_ood_data(run: StageRun, cfg_obj, gen_dir: Path, tasks: list, done: dict,
                    workers: int, progress: bool) -> None:
     """The object heaps' labelled candidates (``ood/<split>-<shard>.npz``, ``ood.json``), with
@@ -484,10 +486,7 @@ def _make_ood_data(run: StageRun, cfg_obj, gen_dir: Path, tasks: list, done: dic
 
     meta = SceneDataset(gen_dir, "test")
     sensor = SimpleNamespace(**meta.sensor)  # the box heaps' sensor (camera.json)
-    files = {"splits": {"train": [], "val": []}, "fields": OOD_FIELDS, "reasons": list(REASONS)}
-    for t in tasks:
-        files["splits"][t.split].append(Path(t.path).relative_to(run.work_dir).as_posix())
-    (run.work_dir / "ood.json").write_text(json.dumps(files, indent=2) + "\n")
+    _write_index(run, "ood.json", ("train", "val"), OOD_FIELDS, tasks, lambda t: t.path)
     t0 = time.perf_counter()
     todo = [t for t in tasks if t.path not in done]
     done.update(zip([t.path for t in todo], map_shards(
@@ -588,11 +587,8 @@ def baseline(cfg: DictConfig) -> Path:
                                    lambda path: path)
         if run.resumed:
             run.timings["shards_resumed"] = len(done)
-        meta = {"splits": {s: [] for s in SPLITS}, "fields": CANDIDATE_FIELDS,
-                "reasons": list(REASONS)}
-        for t in tasks:
-            meta["splits"][t.split].append(Path(t.out_path).relative_to(run.work_dir).as_posix())
-        (run.work_dir / "candidates.json").write_text(json.dumps(meta, indent=2) + "\n")
+        _write_index(run, "candidates.json", SPLITS, CANDIDATE_FIELDS, tasks,
+                     lambda t: t.out_path)
         t0 = time.perf_counter()
         todo = [t for t in tasks if t.out_path not in done]
         done.update(zip([t.out_path for t in todo], map_shards(

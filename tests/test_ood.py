@@ -14,7 +14,7 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from conftest import conf_section
+from conftest import conf_section, default_config
 from pipeline.camera.geometry import Intrinsics, camera_pose_above_bin
 from pipeline.camera.raycast import boxes_from_pybullet, raycast_boxes
 from pipeline.camera.raycast_convex import (
@@ -114,9 +114,9 @@ def test_labels_come_from_the_mesh_contact_model(client):
     cands = Candidates(uv=np.array([on, off]), point=point, axis=axis,
                        depth=point[:, 2], angle=np.zeros(2))
     quality, reason = label_candidates(client, [body], cands, depth, mask, INTR, T_DOWN,
-                                       SuctionModelConfig(), np.random.default_rng(0))
+                                       default_config(SuctionModelConfig), np.random.default_rng(0))
     assert [REASONS[r] for r in reason] == ["ok", "not_on_box"]
-    cfg = SuctionModelConfig()
+    cfg = default_config(SuctionModelConfig)
     _, axes = perturbed_grasps(point, axis, cfg, np.random.default_rng(0))  # as labelled
     tilt = np.degrees(np.arccos(np.clip(axes[0] @ axis[0], -1.0, 1.0)))  # (K,)
     limit = np.degrees(np.arctan(cfg.compliance / (2 * cfg.cup_radius)))

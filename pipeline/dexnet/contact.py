@@ -70,6 +70,18 @@ from pipeline.config.build import from_section
 # Reason codes of ContactResult.reason: REASONS[code] is its name.
 REASONS = ("ok", "not_on_box", "off_face", "uneven", "occluded", "pull", "shear", "torsion",
            "bending")
+
+# The columns of a labelled suction candidate (the baseline's candidate shards, in-domain and out
+# of domain; a scene index column precedes them):
+LABELLED_CANDIDATE_FIELDS = {
+    "uv": "(M, 2) int64 pixel (u, v)",
+    "point": "(M, 3) float64 contact point, camera frame, m",
+    "axis": "(M, 3) float64 approach axis (into the object), camera frame",
+    "depth": "(M,) float64 m", "angle": "(M,) float64 rad from the optical axis",
+    "quality": "(M,) float64 robust quality in [0, 1]",
+    "label": "(M,) bool quality >= suction.quality_threshold",
+    "reason": "(M,) int8 unperturbed contact outcome, index into reasons",
+}
 # Lines are cast from this far back along the approach axis, metres.
 START_OFFSET = 0.05
 

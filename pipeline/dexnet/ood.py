@@ -32,7 +32,7 @@ from pipeline.camera.geometry import (
 from pipeline.camera.raycast_convex import render_convex_depth
 from pipeline.camera.render import check_renderer, render_depth
 from pipeline.camera.sensor import apply_sensor_model
-from pipeline.dexnet.contact import suction_model_config
+from pipeline.dexnet.contact import LABELLED_CANDIDATE_FIELDS, suction_model_config
 from pipeline.dexnet.contact_mesh import RayScene, evaluate_contacts_mesh, robust_quality_mesh
 from pipeline.dexnet.gqcnn import candidate_inputs
 from pipeline.dexnet.planner import crop_config, sampler_config, workspace
@@ -178,13 +178,7 @@ def object_heap_scene(client: int, cfg, rng: np.random.Generator, count: int, se
 # One row per labelled candidate in a shard file (scene-level: ``heap_*``):
 OOD_FIELDS = {
     "scene_index": "(M,) int64 object heap index within the split",
-    "uv": "(M, 2) int64 pixel (u, v)",
-    "point": "(M, 3) float64 contact point, camera frame, m",
-    "axis": "(M, 3) float64 approach axis (into the object), camera frame",
-    "depth": "(M,) float64 m", "angle": "(M,) float64 rad from the optical axis",
-    "quality": "(M,) float64 robust quality in [0, 1]",
-    "label": "(M,) bool quality >= suction.quality_threshold",
-    "reason": "(M,) int8 unperturbed contact outcome, index into reasons",
+    **LABELLED_CANDIDATE_FIELDS,
     "crop": "(M, 1, S, S) float16 GQ-CNN crop (dexnet.crop) of the depth the planner sees",
     "pose": "(M, 2) float32 GQ-CNN pose input (depth, approach angle)",
     "heap_objects": "(N,) int32 objects at rest per heap of the shard",
