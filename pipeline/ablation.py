@@ -39,7 +39,6 @@ from pipeline.tracking import StageLog
 STAGE = "ablation"
 SECTIONS = ("seed", "ablation")
 NOT_AFFECTING_RESULT = ("ablation.force",)
-PLANNERS = ("dcnn", "dexnet", "oracle")
 ROW_KEYS = ("success_rate", "attempts", "successes", "picked", "boxes", "pph_motion",
             "path_deviation_mm_median", "path_deviation_mm_max")
 
@@ -80,6 +79,8 @@ def run_variants(cfg: DictConfig, base: list[str]) -> list[dict]:
 def ablation(cfg: DictConfig, overrides: list[str] | None = None) -> Path:
     """Run the ablation; returns its artifact folder. ``overrides``: passed to every run (the
     command line's own, by default none)."""
+    from pipeline.evaluate import PLANNERS
+
     ab = cfg.ablation
     for planner in ab.planners:
         if str(planner) not in PLANNERS:

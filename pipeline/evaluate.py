@@ -1,10 +1,11 @@
 """The closed-loop evaluation stage (paper Secs. 5, 6, Table 3): picking every box out of a bin.
 
-    python -m pipeline.evaluate experiment=smoke [planner=dcnn|dexnet|both]
+    python -m pipeline.evaluate experiment=smoke [planner=dcnn|dexnet|dexnet_ood|oracle|all]
 
 For every planner in ``evaluate.planners`` (``dcnn``: the training artifact
 ``evaluate.train_version``; ``dexnet``: the baseline artifact ``evaluate.baseline_version``,
-variant ``evaluate.dexnet_variant``) and every trial, the same heap (seed (seed, 31, trial)) of
+variant ``evaluate.dexnet_variant``; ``dexnet_ood``: the same artifact's GQ-CNN trained on
+non-box objects, variant ``gqcnn_ood``; ``oracle``: the labels on the home image) and every trial, the same heap (seed (seed, 31, trial)) of
 ``evaluate.boxes_per_trial`` boxes of ``eval_boxes`` is dropped into the bin and the robot
 picks until the trial ends (``pipeline.picking.trial``). Trials run in parallel processes; the
 artifact does not depend on the number of workers.
@@ -63,7 +64,16 @@ SECTIONS = ("seed", "camera", "sensor", "depth_filter", "bin", "physics", "hand"
 NOT_AFFECTING_RESULT = ("evaluate.train_version", "evaluate.baseline_version",
                         "evaluate.workers", "evaluate.force", "evaluate.log_trials",
                         "evaluate.num_threads")
-PLANNERS = ("dcnn", "dexnet", "oracle")
+PLANNERS = ("dcnn", "dexnet", "dexnet_ood", "oracle")
+# The Dex-Net-style planners: the baseline variant each drives the robot with (None: the one
+# ``evaluate.dexnet_variant`` names). ``dexnet_ood``: the GQ-CNN trained on non-box objects.
+DEXNET_PLANNERS = {"dexnet": None, "dexnet_ood": "gqcnn_ood"}
+
+
+def dexnet_variant(cfg, name: str) -> str:
+    """The baseline variant (``pipeline.dexnet.planner.BASELINE_VARIANTS``) of Dex-Net-style
+    planner ``name``."""
+    return DEXNET_PLANNERS[name] or str(cfg.evaluate.dexnet_variant)
 HEAP_SEED, PLAN_SEED, SENSOR_SEED = 31, 37, 41
 PAPER_TABLE3 = [  # paper Table 3, as reported
     {"system": "Dex-Net 3.0", "hand": "suction (1 cup)", "success": 98.0, "planning_s": 3.0,
@@ -111,11 +121,10 @@ def make_planner(cfg, name: str, train_dir: str | None, baseline_dir: str | None
         # the composed train.ranking (policy included), with the model's th unless overridden
         net.ranking = ranking_config(cfg, net.ranking.threshold if th is None else float(th))
         return lambda depth, intr, rng: net.plan(depth, intr)
-    if name == "dexnet":
+    if name in DEXNET_PLANNERS:
         from pipeline.dexnet.planner import DexNetPlanner
 
-        dex = DexNetPlanner.for_variant(cfg, str(cfg.evaluate.dexnet_variant), T_home,
-                                        baseline_dir)
+        dex = DexNetPlanner.for_variant(cfg, dexnet_variant(cfg, name), T_home, baseline_dir)
         k = int(cfg.evaluate.max_candidates_checked) if bool(cfg.evaluate.check_reachability) \
             else 1
         return lambda depth, intr, rng: dex.plan(depth, intr, rng=rng, max_grasps=k)
@@ -279,14 +288,19 @@ def evaluate(cfg: DictConfig) -> Path:
     if "dexnet" in planners and str(cfg.evaluate.dexnet_variant) not in BASELINE_VARIANTS:
         raise ValueError(f"evaluate.dexnet_variant={cfg.evaluate.dexnet_variant}: choose from "
                          f"{', '.join(BASELINE_VARIANTS)}")
-    if "dexnet" in planners and BASELINE_VARIANTS[str(cfg.evaluate.dexnet_variant)][1]:
-        baseline_dir = resolve_artifact(data_root(cfg), "baseline", cfg.evaluate.baseline_version,
-                                        verify=True, key="evaluate.baseline_version")
-        model_file = BASELINE_VARIANTS[str(cfg.evaluate.dexnet_variant)][1]
+    for name in (n for n in planners if n in DEXNET_PLANNERS):
+        variant = dexnet_variant(cfg, name)
+        model_file = BASELINE_VARIANTS[variant][1]
+        if model_file is None:  # training-free (planarity)
+            continue
+        if baseline_dir is None:
+            baseline_dir = resolve_artifact(data_root(cfg), "baseline",
+                                            cfg.evaluate.baseline_version, verify=True,
+                                            key="evaluate.baseline_version")
         if not (baseline_dir / model_file).is_file():
             raise ValueError(f"baseline artifact {baseline_dir.name} has no {model_file} (its "
-                             f"baseline.variants left {cfg.evaluate.dexnet_variant} out): run "
-                             f"`make baseline` with {cfg.evaluate.dexnet_variant} in "
+                             f"baseline.variants left {variant} out, needed by planner "
+                             f"{name}): run `make baseline` with {variant} in "
                              "baseline.variants, or pass another evaluate.baseline_version")
         upstream["baseline"] = baseline_dir.name
     config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)

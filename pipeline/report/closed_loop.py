@@ -21,7 +21,10 @@ from pipeline.report.upstream import ArtifactInfo, resolve_upstream
 TABLE3_SECTION = "Table 3: closed-loop bin-picking (Secs. 5, 6)"
 EVALUATE_NOT_RUN = "Closed-loop evaluation: not run yet (`make evaluate`)."
 PLANNER_LABELS = {"dcnn": "ours: DCNN + descriptor + 2.5D VS (2 cups)",
-                  "dexnet": "Dex-Net-style GQ-CNN + CEM, same robot (1 cup)",
+                  "dexnet": "Dex-Net-style GQ-CNN + CEM, trained on the box heaps, same robot "
+                            "(1 cup)",
+                  "dexnet_ood": "Dex-Net-style GQ-CNN + CEM, trained on non-box objects, same "
+                                "robot (1 cup)",
                   "oracle": "oracle: the labelling stage's labels on the home image (ground "
                             "truth; the ceiling of execution, not a planner)"}
 FAILURE_MEANING = {
@@ -64,7 +67,8 @@ def table3_table(info: EvaluateInfo) -> Table:
                      r["pph"] if r["pph"] is not None else None])
     for r in info.metrics["table3"]:
         rows.append(["this reproduction", PLANNER_LABELS.get(r["planner"], r["planner"]),
-                     "suction (1 cup)" if r["planner"] == "dexnet" else "suction (2 cups)",
+                     "suction (1 cup)" if r["planner"] in ("dexnet", "dexnet_ood")
+                     else "suction (2 cups)",
                      times(r["success_rate"]), int(r["attempts"]),
                      f"{int(r['picked'])}/{int(r['boxes'])}",
                      pct(int(r["picked"]), int(r["boxes"])), r["pph_motion"]])

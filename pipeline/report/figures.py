@@ -319,7 +319,7 @@ def figure_servo_convergence(csv_path: Path, path: Path) -> None:
     groups: dict[tuple, list[dict]] = {}
     for r in rows:
         groups.setdefault((r["planner"], r["trial"], r["attempt"]), []).append(r)
-    colours = {"dcnn": "tab:blue", "dexnet": "tab:red"}
+    colours = {"dcnn": "tab:blue", "dexnet": "tab:red", "dexnet_ood": "tab:orange"}
     seen = set()
     for (planner, _, _), rs in groups.items():
         t = [float(r["t_s"]) for r in rs]
