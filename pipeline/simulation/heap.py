@@ -170,7 +170,7 @@ def corner_drift(client: int, body_ids: list[int], steps: int) -> np.ndarray:
     return np.linalg.norm(box_corners(client, body_ids, half) - before, axis=-1).max(-1)
 
 
-def _inside_bin(position: np.ndarray, bin_cfg) -> bool:
+def inside_bin(position: np.ndarray, bin_cfg) -> bool:
     return (abs(position[0]) < bin_cfg.inner_length_x / 2
             and abs(position[1]) < bin_cfg.inner_width_y / 2
             and -0.005 < position[2] < bin_cfg.wall_height + 0.1)
@@ -238,7 +238,7 @@ def drop_heap(client: int, rng: np.random.Generator, boxes_cfg, bin_cfg, physics
     removed = 0
     for body, _ in list(bodies):
         pos, _ = p.getBasePositionAndOrientation(body, physicsClientId=client)
-        if not _inside_bin(np.asarray(pos), bin_cfg):
+        if not inside_bin(np.asarray(pos), bin_cfg):
             p.removeBody(body, physicsClientId=client)
             bodies = [(b, k) for b, k in bodies if b != body]
             removed += 1

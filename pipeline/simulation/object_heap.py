@@ -19,7 +19,7 @@ import numpy as np
 import pybullet as p
 
 from pipeline.config.build import from_section
-from pipeline.simulation.heap import _inside_bin, random_quaternion, settle
+from pipeline.simulation.heap import inside_bin, random_quaternion, settle
 from pipeline.simulation.objects import ObjectSetSpec, ObjectShape, create_body, sample_object
 
 
@@ -101,7 +101,7 @@ def drop_object_heap(client: int, rng: np.random.Generator, objects_cfg, bin_cfg
     removed = 0
     for body in ids:
         pos, _ = p.getBasePositionAndOrientation(body, physicsClientId=client)
-        if not _inside_bin(np.asarray(pos), bin_cfg):
+        if not inside_bin(np.asarray(pos), bin_cfg):
             p.removeBody(body, physicsClientId=client)
             del bodies[body]
             removed += 1
