@@ -171,6 +171,8 @@ def corner_drift(client: int, body_ids: list[int], steps: int) -> np.ndarray:
 
 
 def inside_bin(position: np.ndarray, bin_cfg) -> bool:
+    """Whether a body's centre ``position`` (world frame, m; the bin floor's top at z = 0) lies
+    inside the bin's inner walls, from just below the floor to 0.1 m above the walls' tops."""
     return (abs(position[0]) < bin_cfg.inner_length_x / 2
             and abs(position[1]) < bin_cfg.inner_width_y / 2
             and -0.005 < position[2] < bin_cfg.wall_height + 0.1)
