@@ -49,14 +49,15 @@ def resolve_baseline(root: Path, version: str, gen_version: str,
     """The baseline artifact to report, or None when ``version`` is "latest" and none exists.
 
     Raises ``ArtifactError`` when a named version does not exist, when it was made from another
-    generation artifact, when its DCNN row comes from another train artifact than the report's,
+    generation artifact (one with the same data, made by other code, is the same), when its DCNN row comes from another train artifact than the report's,
     or when its manifest lacks Table 2.
     """
     return resolve_upstream(root, "baseline", version, BaselineInfo.load, [
         Match("generate", gen_version, lambda name, theirs: (
             f"baseline artifact {name} was made from generation artifact "
             f"{theirs}, but the report reads {gen_version}: pass matching versions "
-            f"(report.baseline_version=...), or rerun `make baseline` and then the report.")),
+            f"(report.baseline_version=...), or rerun `make baseline` and then the report."),
+            stage_dir=root / "generate"),
         Match("train", train_version, lambda name, theirs: (
             f"baseline artifact {name} compared the DCNN of train artifact {theirs}, "
             f"but the report reads train artifact {train_version}: rerun `make baseline` "

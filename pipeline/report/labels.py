@@ -95,14 +95,15 @@ def resolve_labels(root: Path, version: str, gen_version: str) -> LabelInfo | No
     """The label artifact to report, or None when ``version`` is "latest" and none exists.
 
     Raises ``ArtifactError`` when a named version does not exist, when the artifact was made from
-    another generation artifact than ``gen_version``, or when its manifest lacks the metrics.
+    another generation artifact than ``gen_version`` (or one with the same data), or when its manifest lacks the metrics.
     """
     return resolve_upstream(root, "label", version, LabelInfo.load, [Match(
         "generate", gen_version, lambda name, theirs: (
             f"label artifact {name} was made from generation artifact {theirs}, but the "
             f"report reads generation artifact {gen_version}: pass matching versions "
             f"(report.generate_version={theirs} report.label_version={name}), or rerun "
-            f"`make label` (label.generate_version={gen_version}) and then the report."))])
+            f"`make label` (label.generate_version={gen_version}) and then the report."),
+        stage_dir=root / "generate")])
 
 
 def check_labels(labels: LabelInfo, stats: DatasetStats) -> None:

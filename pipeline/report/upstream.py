@@ -51,19 +51,29 @@ Info = TypeVar("Info", bound=ArtifactInfo)
 @dataclass(frozen=True)
 class Match:
     """The artifact must have been made from the version the report reads of another upstream:
-    its manifest's ``upstream[key]`` must equal ``expected``."""
+    its manifest's ``upstream[key]`` must equal ``expected``, or, with ``stage_dir`` (the folder
+    of that upstream stage's versions), name a version that holds the same data
+    (``pipeline.artifacts.equivalence.same_data``: a version made by other code whose files
+    are identical but for the logs)."""
 
     key: str  # e.g. "generate"
     expected: str | None  # the report's version of that upstream (None: the report has none)
     message: Callable[[str, str | None], str]  # (artifact's version, its upstream[key]) -> error
     if_both_known: bool = False  # True: no check when either version is None
+    stage_dir: Path | None = None  # e.g. data/generate: accept an identical version
 
     def check(self, version: str, upstream: dict) -> None:
+        from pipeline.artifacts.equivalence import same_data
+
         theirs = upstream.get(self.key)
         if self.if_both_known and (theirs is None or self.expected is None):
             return
-        if theirs != self.expected:
-            raise ArtifactError(self.message(version, theirs))
+        if theirs == self.expected:
+            return
+        if self.stage_dir is not None and theirs is not None and self.expected is not None \
+                and same_data(self.stage_dir, theirs, self.expected):
+            return
+        raise ArtifactError(self.message(version, theirs))
 
 
 def resolve_upstream(where: Path, stage: str, version: str, load: Callable[[Path, dict], Info],
