@@ -4,11 +4,13 @@
 
 The paper trains on three box sizes (Sec. 4.3) and claims the planner generalises to the 12 box
 types of its experiments (Fig. 8). This stage measures that claim on the planner's own tables.
-It runs, or reuses when their versions exist, with the command's own overrides:
+With the command's own overrides:
 
-* the ``make reproduce`` pipeline's ``generate`` → ``label`` → ``train`` and ``baseline`` (the
-  trained network and the Dex-Net-style GQ-CNN, both trained on the three training sizes);
-* ``generate boxes=<unseen.boxes>`` with a test split only (``unseen.test_scenes`` heaps; no
+* it reads the trained network (``unseen.train_version``) and the baseline artifact that
+  compared it (``unseen.baseline_version``; both ``latest`` by default, as ``make reproduce``
+  leaves them): the network and the Dex-Net-style GQ-CNNs, trained on the three training sizes
+  (the in-domain one) or on other objects;
+* it runs (or reuses) ``generate boxes=<unseen.boxes>`` with a test split only (``unseen.test_scenes`` heaps; no
   training or validation scenes) and its ``label`` artifact;
 
 then measures on that unseen-size test split:
@@ -41,7 +43,8 @@ import hydra
 import numpy as np
 from omegaconf import DictConfig
 
-from pipeline.artifacts import compute_version, load_manifest, run_stage, stage_config
+from pipeline.artifacts import (
+    compute_version, load_manifest, resolve_artifact, run_stage, stage_config)
 from pipeline.artifacts.csvfile import write_rows
 from pipeline.artifacts.jsonfile import json_safe, write_json
 from pipeline.artifacts.pointers import keep_latest
@@ -52,9 +55,11 @@ from pipeline.tracking import StageLog
 
 STAGE = "unseen"
 SECTIONS = ("seed", "unseen")
-NOT_AFFECTING_RESULT = ("unseen.force", "unseen.log_images")
+NOT_AFFECTING_RESULT = ("unseen.force", "unseen.log_images",  # the versions are upstream
+                        "unseen.train_version", "unseen.baseline_version")
 TABLE1_KEYS = ("top1", "top1pct", "top5pct", "top10pct")
-PLANNER_COLORS = {"dcnn": (40, 200, 40), "gqcnn": (200, 40, 40), "planarity": (120, 120, 255)}
+PLANNER_COLORS = {"dcnn": (40, 200, 40), "gqcnn": (200, 40, 40), "gqcnn_ood": (240, 150, 40),
+                  "planarity": (120, 120, 255)}
 
 
 def build(base: list[str], uc, data: Path, models: Path) -> dict[str, Path]:
@@ -67,19 +72,25 @@ def build(base: list[str], uc, data: Path, models: Path) -> dict[str, Path]:
         choices = sorted(p.stem for p in boxes_file.parent.glob("*.yaml"))
         raise ValueError(f"unseen.boxes={uc.boxes!r} is not a file of conf/boxes/: choose one "
                          f"of {choices}")
-    dirs: dict[str, Path] = {}
+    # The planners under test: the trained network and the baseline artifact that compared it
+    # (``make train``, ``make baseline``; ``latest`` unless named), as the evaluate stage reads them.
+    dirs = {"train": resolve_artifact(models, "train", str(uc.train_version), verify=True,
+                                      key="unseen.train_version"),
+            "baseline": resolve_artifact(data, "baseline", str(uc.baseline_version), verify=True,
+                                         key="unseen.baseline_version")}
+    compared = (load_manifest(dirs["baseline"]).get("upstream") or {}).get("train")
+    if compared != dirs["train"].name:
+        raise ValueError(
+            f"baseline artifact {dirs['baseline'].name} compared train artifact {compared}, not "
+            f"{dirs['train'].name}: its seen-size Table 2 would not be this network's. Rerun "
+            f"`make baseline` (baseline.train_version={dirs['train'].name}), or pass matching "
+            "unseen.train_version and unseen.baseline_version")
 
     def run(key: str, stage: str, extra: list[str]) -> Path:
         dirs[key] = run_named_stage(stage, base + extra, f"{STAGE}: {key}")
         return dirs[key]
 
-    # The ordinary pipeline first (its runs may point ``latest`` at themselves, as
-    # ``make reproduce`` does); then the unseen heaps, which must not.
-    gen = run("generate_seen", "generate", [])
-    lab = run("label_seen", "label", [f"label.generate_version={gen.name}"])
-    trained = run("train", "train", [f"train.label_version={lab.name}"])
-    run("baseline", "baseline", [f"baseline.generate_version={gen.name}",
-                                 f"baseline.train_version={trained.name}"])
+    # The unseen heaps, which must not become ``latest``.
     with keep_latest([data / "generate", data / "label"]):
         gen_u = run("generate_unseen", "generate", [
             f"boxes={uc.boxes}", "generate.num_scenes=0", "generate.num_val_scenes=0",

@@ -44,8 +44,19 @@ def test_smoke_unseen_end_to_end(tmp_path):
     from pipeline.report.unseen import UNSEEN_SECTION
     from pipeline.unseen import unseen
 
+    from pipeline.baseline import baseline
+    from pipeline.generate import generate
+    from pipeline.label import label
+    from pipeline.train import train
+
     base = _base(tmp_path)
     cfg = compose("unseen", base)
+    with pytest.raises(Exception, match="unseen.train_version"):  # nothing trained yet
+        unseen(cfg, base)
+    for stage, fn in (("generate", generate), ("label", label), ("train", train),
+                      ("baseline", baseline)):  # as make reproduce runs them first
+        fn(compose(stage, base))
+    seen_gen = (tmp_path / "data" / "generate" / "latest").resolve().name
     out = unseen(cfg, base)
     data = json.loads((out / "unseen.json").read_text())
     manifest = load_manifest(out)
@@ -55,7 +66,9 @@ def test_smoke_unseen_end_to_end(tmp_path):
     assert gen_u["config"]["boxes"]["name"] == "unseen"
     assert gen_u["config"]["generate"]["num_scenes"] == 0
     # ``latest`` names the ordinary (seen-size) pipeline, not the unseen heaps
-    assert (tmp_path / "data" / "generate" / "latest").resolve().name == up["generate_seen"]
+    assert (tmp_path / "data" / "generate" / "latest").resolve().name == seen_gen
+    assert up["train"] == (tmp_path / "models" / "train" / "latest").resolve().name
+    assert up["baseline"] == (tmp_path / "data" / "baseline" / "latest").resolve().name
     # Table 1: the seen row is the train manifest's, the unseen row is measured at the same th
     t1 = {r["set"]: r for r in data["table1"]}
     train_t1 = load_manifest(tmp_path / "models" / "train" / up["train"])["metrics"]["table1"]

@@ -510,6 +510,8 @@ class UnseenConfig:
     """The unseen-size test set (``pipeline.unseen``): Tables 1 and 2 on heaps of other boxes."""
 
     boxes: str = MISSING  # a file of conf/boxes/ (the heaps' box sizes)
+    train_version: str = MISSING  # the trained network ("latest" or a version)
+    baseline_version: str = MISSING  # the baseline artifact that compared it
     test_scenes: int = MISSING
     log_images: int = MISSING
     force: bool = MISSING
