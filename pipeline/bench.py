@@ -20,7 +20,7 @@ hole filling and the median, and what they do to the depth of the bench's heaps 
 without data, error against the ideal depth).
 
     python -m pipeline.bench [--scenes 60]
-                             [--only stages|render|planners|closed-loop|executors|training|sensor]
+                             [--only stages|render|planners|closed-loop|executors|training|sensor|ood]
                              [--experiment paper] [--root <paths.root>]
 """
 
