@@ -170,6 +170,14 @@ def corner_drift(client: int, body_ids: list[int], steps: int) -> np.ndarray:
     return np.linalg.norm(box_corners(client, body_ids, half) - before, axis=-1).max(-1)
 
 
+def drop_area(bin_cfg, physics_cfg) -> tuple[float, float]:
+    """Half extents (hx, hy) in metres of the area bodies are dropped over: the bin's inner walls
+    (world x = ±inner_length_x / 2, y = ±inner_width_y / 2) less ``physics.drop_margin``; a drop
+    position is drawn uniformly from [-hx, hx] × [-hy, hy]."""
+    margin = float(physics_cfg.drop_margin)
+    return bin_cfg.inner_length_x / 2 - margin, bin_cfg.inner_width_y / 2 - margin
+
+
 def inside_bin(position: np.ndarray, bin_cfg) -> bool:
     """Whether a body's centre ``position`` (world frame, m; the bin floor's top at z = 0) lies
     inside the bin's inner walls, from just below the floor to 0.1 m above the walls' tops."""
@@ -208,9 +216,7 @@ def drop_heap(client: int, rng: np.random.Generator, boxes_cfg, bin_cfg, physics
     n = int(rng.integers(boxes_cfg.min_count, boxes_cfg.max_count + 1))
     sizes = [np.asarray(t.size, dtype=np.float64) for t in boxes_cfg.types]
     shapes = [_box_shapes(client, size) for size in sizes]
-    margin = physics_cfg.drop_margin
-    hx = bin_cfg.inner_length_x / 2 - margin
-    hy = bin_cfg.inner_width_y / 2 - margin
+    hx, hy = drop_area(bin_cfg, physics_cfg)
     bodies: list[tuple[int, int]] = []  # (body id, type index)
     body_size: dict[int, np.ndarray] = {}
     steps = 0

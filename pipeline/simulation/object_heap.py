@@ -19,7 +19,7 @@ import numpy as np
 import pybullet as p
 
 from pipeline.config.build import from_section
-from pipeline.simulation.heap import inside_bin, random_quaternion, settle
+from pipeline.simulation.heap import drop_area, inside_bin, random_quaternion, settle
 from pipeline.simulation.objects import ObjectSetSpec, ObjectShape, create_body, sample_object
 
 
@@ -72,9 +72,7 @@ def drop_object_heap(client: int, rng: np.random.Generator, objects_cfg, bin_cfg
         raise ValueError(f"objects.min_count and max_count must satisfy 0 <= min <= max, got "
                          f"{lo} and {hi}")
     n = int(rng.integers(lo, hi + 1))
-    margin = physics_cfg.drop_margin
-    hx = bin_cfg.inner_length_x / 2 - margin
-    hy = bin_cfg.inner_width_y / 2 - margin
+    hx, hy = drop_area(bin_cfg, physics_cfg)
     bodies: dict[int, ObjectShape] = {}
     steps = 0
     for i in range(n):
