@@ -38,40 +38,39 @@ def test_bad_input_is_refused_before_any_work(tmp_path):
 
 
 @pytest.mark.slow
-def test_smoke_unseen_end_to_end(tmp_path):
-    from pipeline.artifacts import load_manifest
+def test_smoke_unseen_end_to_end(smoke_pipeline, tmp_path):
+    from conftest import smoke_overrides
+    from pipeline.artifacts import ArtifactError, load_manifest
+    from pipeline.baseline import baseline
     from pipeline.report import report
     from pipeline.report.unseen import UNSEEN_SECTION
     from pipeline.unseen import unseen
 
-    from pipeline.baseline import baseline
-    from pipeline.generate import generate
-    from pipeline.label import label
-    from pipeline.train import train
-
-    base = _base(tmp_path)
+    # the session's generate -> label -> train; nothing trained yet in an empty root
+    with pytest.raises(ArtifactError, match="unseen.train_version"):
+        unseen(compose("unseen", _base(tmp_path / "empty")), _base(tmp_path / "empty"))
+    assert not (tmp_path / "empty" / "data").exists()  # refused before any work
+    smoke = smoke_pipeline.copy(tmp_path / "root")
+    root = smoke.root
+    base = smoke_overrides(root, "baseline.epochs=1")
+    baseline(compose("baseline", base))  # as make reproduce runs it before unseen
     cfg = compose("unseen", base)
-    with pytest.raises(Exception, match="unseen.train_version"):  # nothing trained yet
-        unseen(cfg, base)
-    for stage, fn in (("generate", generate), ("label", label), ("train", train),
-                      ("baseline", baseline)):  # as make reproduce runs them first
-        fn(compose(stage, base))
-    seen_gen = (tmp_path / "data" / "generate" / "latest").resolve().name
+    seen_gen = smoke.artifact("generate").name
     out = unseen(cfg, base)
     data = json.loads((out / "unseen.json").read_text())
     manifest = load_manifest(out)
     up = manifest["upstream"]
     # the unseen heaps: a test split only, of the unseen boxes
-    gen_u = load_manifest(tmp_path / "data" / "generate" / up["generate_unseen"])
+    gen_u = load_manifest(root / "data" / "generate" / up["generate_unseen"])
     assert gen_u["config"]["boxes"]["name"] == "unseen"
     assert gen_u["config"]["generate"]["num_scenes"] == 0
     # ``latest`` names the ordinary (seen-size) pipeline, not the unseen heaps
-    assert (tmp_path / "data" / "generate" / "latest").resolve().name == seen_gen
-    assert up["train"] == (tmp_path / "models" / "train" / "latest").resolve().name
-    assert up["baseline"] == (tmp_path / "data" / "baseline" / "latest").resolve().name
+    assert smoke.artifact("generate").name == seen_gen
+    assert up["train"] == smoke.artifact("train").name
+    assert up["baseline"] == smoke.artifact("baseline").name
     # Table 1: the seen row is the train manifest's, the unseen row is measured at the same th
     t1 = {r["set"]: r for r in data["table1"]}
-    train_t1 = load_manifest(tmp_path / "models" / "train" / up["train"])["metrics"]["table1"]
+    train_t1 = load_manifest(root / "models" / "train" / up["train"])["metrics"]["table1"]
     assert t1["seen"]["top1"] == (None if train_t1["top1"] is None
                                   else round(train_t1["top1"], 6))
     assert t1["unseen"]["threshold"] == train_t1["threshold"]
@@ -84,6 +83,6 @@ def test_smoke_unseen_end_to_end(tmp_path):
         assert (out / name).is_file()
     assert unseen(cfg, base) == out  # reused
     report(compose("report", base))
-    readme = (tmp_path / "reports" / "README.md").read_text()
+    readme = (root / "reports" / "README.md").read_text()
     assert f"## {UNSEEN_SECTION}" in readme and out.name in readme
-    assert (tmp_path / "reports" / "tables" / "unseen_table2.csv").is_file()
+    assert (root / "reports" / "tables" / "unseen_table2.csv").is_file()
