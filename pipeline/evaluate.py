@@ -112,9 +112,7 @@ def make_planner(cfg, name: str, train_dir: str | None, baseline_dir: str | None
     """``plan(depth_m, intrinsics, rng)`` for planner ``name`` (``oracle``: also ``frame=``; it
     reads the ``cell``'s true box poses, ``pipeline.picking.oracle``)."""
     if name == "dcnn":
-        from pipeline.planner.planner import Planner
-
-        from pipeline.planner.planner import ranking_config
+        from pipeline.planner.planner import Planner, ranking_config
 
         net = Planner.load(train_dir, device="cpu")
         th = cfg.evaluate.dcnn_threshold
