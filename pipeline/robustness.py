@@ -5,14 +5,16 @@
 The paper trains and tests on noise-free simulated depth. This stage measures what a real
 SR300-class camera's depth (``conf/sensor/sr300.yaml``: noise growing with depth and incidence,
 projector shadows, steep-surface and edge dropout, 1/8 mm quantisation) does to the method, and
-the paper's proposed fixes of its failure cases (Sec. 8.4). It runs, or reuses when their
-versions exist, every stage it needs, with the command's own overrides:
+the paper's proposed fixes of its failure cases (Sec. 8.4). With the command's own overrides:
 
-* the **clean** pipeline: ``generate`` → ``label`` → ``train`` (the ``make reproduce`` ones)
-  and ``baseline`` (the Dex-Net-style GQ-CNN, trained on clean images);
-* the **noisy** pipeline: ``generate sensor=<robustness.sensor>`` (same heaps, same seeds; the
-  shards hold the sensor's depth and the ideal depth) → ``label`` (labels from the ideal depth,
-  so identical to the clean labels) → ``train`` (the network sees noisy depth);
+* it reads the **clean** pipeline: the network trained on ideal depth
+  (``robustness.train_version``), the label and generation artifacts it was trained on, and the
+  baseline artifact that compared it (``robustness.baseline_version``: the Dex-Net-style
+  GQ-CNNs; both ``latest`` by default, as ``make reproduce`` leaves them);
+* it runs, or reuses when their versions exist, the **noisy** pipeline:
+  ``generate sensor=<robustness.sensor>`` (same heaps, same seeds; the shards hold the sensor's
+  depth and the ideal depth) → ``label`` (labels from the ideal depth, so identical to the clean
+  labels) → ``train`` (the network sees noisy depth);
 
 then measures, on the noisy generation's test split (the same heaps as the clean one):
 
@@ -49,10 +51,11 @@ import hydra
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
-from pipeline.artifacts import compute_version, run_stage, stage_config
+from pipeline.artifacts import (
+    compute_version, load_manifest, resolve_artifact, run_stage, stage_config)
 from pipeline.artifacts.csvfile import write_rows
 from pipeline.artifacts.jsonfile import json_safe, write_json
-from pipeline.artifacts.stages import run_named_stage
+from pipeline.artifacts.stages import compared_pair, run_named_stage
 from pipeline.artifacts.store import StageRun
 from pipeline.cli import (
     CONF_DIR, compose, data_root, own_overrides, scale_overrides, stage_main,
@@ -61,7 +64,8 @@ from pipeline.tracking import StageLog
 
 STAGE = "robustness"
 SECTIONS = ("seed", "robustness")
-NOT_AFFECTING_RESULT = ("robustness.force",)
+NOT_AFFECTING_RESULT = ("robustness.force",  # the versions are upstream
+                        "robustness.train_version", "robustness.baseline_version")
 IDEAL, SENSOR = "ideal", "sensor"  # Table inputs; "sensor+<filter>": sensor depth, then a filter
 
 
@@ -91,14 +95,24 @@ class Pipelines:
         self.versions[key], self.dirs[key] = out.name, out
         return out
 
-    def build(self) -> None:
-        for kind, extra in (("clean", []), ("noisy", [f"sensor={self.sensor}"])):
-            gen = self._run(f"generate_{kind}", "generate", extra)
-            lab = self._run(f"label_{kind}", "label", [f"label.generate_version={gen.name}"])
-            self._run(f"train_{kind}", "train", [f"train.label_version={lab.name}"])
-        self._run("baseline", "baseline", [
-            f"baseline.generate_version={self.versions['generate_clean']}",
-            f"baseline.train_version={self.versions['train_clean']}"])
+    def _use(self, key: str, folder: Path) -> None:
+        self.versions[key], self.dirs[key] = folder.name, folder
+
+    def build(self, train_version: str, baseline_version: str) -> None:
+        """The clean pipeline as it is (``compared_pair``; its train artifact's upstream label
+        and generation artifacts), then the noisy pipeline, run or reused."""
+        pair = compared_pair(self.stage_dirs["baseline"].parent,
+                             self.stage_dirs["train"].parent, train_version, baseline_version,
+                             STAGE)
+        self._use("train_clean", pair["train"])
+        self._use("baseline", pair["baseline"])
+        up = load_manifest(pair["train"]).get("upstream") or {}
+        for stage in ("label", "generate"):
+            self._use(f"{stage}_clean", resolve_artifact(  # the train artifact's upstream
+                self.stage_dirs[stage].parent, stage, str(up.get(stage)), verify=True))
+        gen = self._run("generate_noisy", "generate", [f"sensor={self.sensor}"])
+        lab = self._run("label_noisy", "label", [f"label.generate_version={gen.name}"])
+        self._run("train_noisy", "train", [f"train.label_version={lab.name}"])
 
     def evaluate(self, name: str, model: str, overrides: list[str], trials: int) -> Path:
         return self._run(f"evaluate_{name}", "evaluate", [
@@ -255,7 +269,7 @@ def robustness(cfg: DictConfig, overrides: list[str] | None = None) -> Path:
                              "(trained on ideal depth) or noisy (trained on the sensor's depth)")
     trials = int(rc.closed_loop_trials)
     with p.keep_latest():
-        p.build()
+        p.build(str(rc.train_version), str(rc.baseline_version))
         cl = closed_loop_rows(p, "sensor", rc.closed_loop, trials)
         cl += closed_loop_rows(p, "policy", rc.policies, trials)
     upstream = dict(sorted(p.versions.items()))

@@ -44,11 +44,11 @@ import numpy as np
 from omegaconf import DictConfig
 
 from pipeline.artifacts import (
-    compute_version, load_manifest, resolve_artifact, run_stage, stage_config)
+    compute_version, load_manifest, run_stage, stage_config)
 from pipeline.artifacts.csvfile import write_rows
 from pipeline.artifacts.jsonfile import json_safe, write_json
 from pipeline.artifacts.pointers import keep_latest
-from pipeline.artifacts.stages import run_named_stage
+from pipeline.artifacts.stages import compared_pair, run_named_stage
 from pipeline.artifacts.store import StageRun
 from pipeline.cli import CONF_DIR, compose, data_root, own_overrides, scale_overrides, stage_main
 from pipeline.tracking import StageLog
@@ -74,17 +74,7 @@ def build(base: list[str], uc, data: Path, models: Path) -> dict[str, Path]:
                          f"of {choices}")
     # The planners under test: the trained network and the baseline artifact that compared it
     # (``make train``, ``make baseline``; ``latest`` unless named), as the evaluate stage reads them.
-    dirs = {"train": resolve_artifact(models, "train", str(uc.train_version), verify=True,
-                                      key="unseen.train_version"),
-            "baseline": resolve_artifact(data, "baseline", str(uc.baseline_version), verify=True,
-                                         key="unseen.baseline_version")}
-    compared = (load_manifest(dirs["baseline"]).get("upstream") or {}).get("train")
-    if compared != dirs["train"].name:
-        raise ValueError(
-            f"baseline artifact {dirs['baseline'].name} compared train artifact {compared}, not "
-            f"{dirs['train'].name}: its seen-size Table 2 would not be this network's. Rerun "
-            f"`make baseline` (baseline.train_version={dirs['train'].name}), or pass matching "
-            "unseen.train_version and unseen.baseline_version")
+    dirs = compared_pair(data, models, uc.train_version, uc.baseline_version, STAGE)
 
     def run(key: str, stage: str, extra: list[str]) -> Path:
         dirs[key] = run_named_stage(stage, base + extra, f"{STAGE}: {key}")

@@ -128,22 +128,32 @@ def test_closed_loop_sensor_stream_keeps_the_heaps():
 
 
 @pytest.mark.slow
-def test_smoke_study_end_to_end(tmp_path):
-    """The whole study at smoke scale, two closed-loop variants and two policies: tables,
-    artifacts reused across variants, upstream versions."""
+def test_smoke_study_end_to_end(smoke_pipeline, tmp_path):
+    """The whole study at smoke scale, two closed-loop variants and two policies: the clean
+    pipeline read as `make reproduce` leaves it, the noisy one built; tables, artifacts reused
+    across variants, upstream versions."""
+    from conftest import smoke_overrides
+    from pipeline.artifacts import ArtifactError
+    from pipeline.baseline import baseline
     from pipeline.robustness import robustness
 
-    base = ["experiment=smoke", f"paths.root={tmp_path}", "logging.progress=false"]
+    empty = smoke_overrides(tmp_path / "empty")
+    with pytest.raises(ArtifactError, match="robustness.train_version"):
+        robustness(compose("robustness", empty), empty)  # nothing trained yet
+    assert not (tmp_path / "empty" / "data").exists()  # refused before any work
+    smoke = smoke_pipeline.copy(tmp_path / "root")
+    base = smoke_overrides(smoke.root, "baseline.epochs=1")
+    baseline(compose("baseline", base))  # as make reproduce runs it before the study
     cfg = compose("robustness", base)
     rc = cfg.robustness
     rc.closed_loop = [rc.closed_loop[0], rc.closed_loop[3]]  # clean_ideal, noisy_sensor
     rc.policies = [rc.policies[0], rc.policies[2]]  # paper (= clean_ideal), area_check
     rc.table1_inputs = ["ideal", "sensor", "sensor+fill_median"]
     rc.table2_inputs = ["ideal", "sensor"]
-    # the clean pipeline first, as `make reproduce` leaves it: the study must not move `latest`
-    gen = generate(compose("generate", base))
+    latest = {s: smoke.artifact(s) for s in ("generate", "label", "train", "baseline")}
     out = robustness(cfg, base)
-    assert (tmp_path / "data" / "generate" / "latest").resolve() == gen.resolve()
+    # the study reads the clean pipeline and leaves every `latest` where it was
+    assert {s: smoke.artifact(s) for s in latest} == latest
     study = json.loads((out / "robustness.json").read_text())
     assert [(r["model"], r["input"]) for r in study["table1"]] == [
         (m, i) for m in ("clean", "noisy") for i in ("ideal", "sensor", "sensor+fill_median")]
@@ -159,6 +169,9 @@ def test_smoke_study_end_to_end(tmp_path):
     for key in ("generate_clean", "generate_noisy", "label_clean", "label_noisy", "train_clean",
                 "train_noisy", "baseline", "evaluate_clean_ideal", "evaluate_noisy_sensor"):
         assert key in up, key
+    for key, stage in (("generate_clean", "generate"), ("label_clean", "label"),
+                       ("train_clean", "train"), ("baseline", "baseline")):
+        assert up[key] == latest[stage].name, key
     for name in ("table1.csv", "table2.csv", "closed_loop.csv", "log.rrd", "log.mcap"):
         assert (out / name).is_file()
     # a rerun reuses everything: the same artifact, no stage run again

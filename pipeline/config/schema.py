@@ -495,6 +495,8 @@ class RobustnessConfig:
     """The robustness study (``pipeline.robustness``)."""
 
     sensor: str = MISSING
+    train_version: str = MISSING  # the clean-trained network ("latest" or a version)
+    baseline_version: str = MISSING  # the baseline artifact that compared it
     table1_inputs: List[str] = MISSING
     table2_inputs: List[str] = MISSING
     max_images: int = MISSING
