@@ -114,10 +114,12 @@ class SmokeRoot:
     damaged file) works on ``copy(...)`` instead."""
 
     root: Path
+    extra: tuple[str, ...] = ()  # overrides it was built with, beyond the session's
 
     def cfg(self, stage: str, *extra: str):
-        """The composed config of ``stage`` rooted here, with the session's scene counts."""
-        return compose(stage, smoke_overrides(self.root, *extra))
+        """The composed config of ``stage`` rooted here, with the session's scene counts, the
+        overrides it was built with and ``extra``."""
+        return compose(stage, smoke_overrides(self.root, *self.extra, *extra))
 
     def copy(self, dest: Path, tops: tuple[str, ...] = ("data", "models")) -> "SmokeRoot":
         """A scratch copy of the top folders ``tops`` in ``dest`` (replaced if it exists)."""
@@ -127,7 +129,7 @@ class SmokeRoot:
             if (self.root / top).exists():
                 shutil.copytree(self.root / top, dest / top, symlinks=True)
         dest.mkdir(parents=True, exist_ok=True)
-        return SmokeRoot(dest)
+        return SmokeRoot(dest, self.extra)
 
     def artifact(self, stage: str) -> Path:
         """The folder ``latest`` of ``stage`` points to."""
@@ -135,19 +137,46 @@ class SmokeRoot:
         return (self.root / top / stage / "latest").resolve()
 
 
-@pytest.fixture(scope="session")
-def smoke_pipeline(tmp_path_factory) -> SmokeRoot:
-    """Generation, labels (with the robot-level checks) and a trained smoke network, built once
-    per session. Read-only: copy it (``SmokeRoot.copy``) to change anything."""
+PIPELINE_STAGES = ("generate", "label", "train")
+
+
+def build_smoke_root(root: Path, *extra: str, stages: tuple[str, ...] = PIPELINE_STAGES
+                     ) -> SmokeRoot:
+    """Run ``stages`` (in order, each reading the previous one's ``latest``) in ``root`` with
+    the session's smoke overrides plus ``extra``."""
     from pipeline.generate import generate
     from pipeline.label import label
     from pipeline.train import train
 
-    smoke = SmokeRoot(tmp_path_factory.mktemp("smoke_pipeline"))
-    generate(smoke.cfg("generate"))
-    label(smoke.cfg("label"))
-    train(smoke.cfg("train"))
+    run = {"generate": generate, "label": label, "train": train}
+    smoke = SmokeRoot(root, tuple(extra))
+    for stage in stages:
+        run[stage](smoke.cfg(stage))
     return smoke
+
+
+@pytest.fixture(scope="session")
+def smoke_pipelines(tmp_path_factory):
+    """A factory: ``smoke_pipelines("sensor=sr300", stages=("generate", "label"))`` → the
+    ``SmokeRoot`` of the session's smoke pipeline with those extra overrides (later overrides
+    win), built once per session and set of overrides. Read-only, like ``smoke_pipeline``."""
+    built: dict = {}
+
+    def get(*extra: str, stages: tuple[str, ...] = PIPELINE_STAGES) -> SmokeRoot:
+        key = (extra, tuple(stages))
+        if key not in built:
+            built[key] = build_smoke_root(tmp_path_factory.mktemp("smoke_pipeline"), *extra,
+                                          stages=stages)
+        return built[key]
+
+    return get
+
+
+@pytest.fixture(scope="session")
+def smoke_pipeline(smoke_pipelines) -> SmokeRoot:
+    """Generation, labels (with the robot-level checks) and a trained smoke network, built once
+    per session. Read-only: copy it (``SmokeRoot.copy``) to change anything."""
+    return smoke_pipelines()
 
 
 @pytest.fixture

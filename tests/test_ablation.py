@@ -7,20 +7,16 @@ import json
 
 import pytest
 
+from conftest import smoke_overrides
 from pipeline.cli import compose
 
 
-def _cfg(tmp_path, *extra):
-    return compose("ablation", ["experiment=smoke", f"paths.root={tmp_path}",
-                                "logging.progress=false", *extra])
-
-
-def test_bad_planner_and_repeated_names_are_refused_before_any_work(tmp_path):
+def test_bad_planner_and_repeated_names_are_refused_before_any_work(smoke_cfg, tmp_path):
     from pipeline.ablation import ablation
 
     with pytest.raises(ValueError, match="ablation.planners"):
-        ablation(_cfg(tmp_path, "ablation.planners=[robot]"))
-    cfg = _cfg(tmp_path)
+        ablation(smoke_cfg("ablation", "ablation.planners=[robot]"))
+    cfg = smoke_cfg("ablation")
     cfg.ablation.variants = [cfg.ablation.variants[0], cfg.ablation.variants[0]]
     with pytest.raises(ValueError, match="repeated names"):
         ablation(cfg)
@@ -35,9 +31,9 @@ def test_smoke_ablation_end_to_end(tmp_path):
     from pipeline.ablation import ablation
     from pipeline.evaluate import evaluate
 
-    base = ["experiment=smoke", f"paths.root={tmp_path}", "logging.progress=false"]
+    base = smoke_overrides(tmp_path)  # the oracle needs no upstream artifact
     first = evaluate(compose("evaluate", base + ["planner=oracle"]))  # as make reproduce leaves it
-    cfg = _cfg(tmp_path, "ablation.planners=[oracle]")  # the DCNN needs a trained network
+    cfg = compose("ablation", base + ["ablation.planners=[oracle]"])  # the DCNN needs a network
     cfg.ablation.variants = [cfg.ablation.variants[0], cfg.ablation.variants[2]]
     out = ablation(cfg, base)
     latest = tmp_path / "data" / "evaluate" / "latest"

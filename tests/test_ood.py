@@ -193,26 +193,22 @@ def test_ood_settings_are_in_the_version_only_with_the_variant():
     assert "objects" not in stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
 
 
-def test_baseline_stage_with_the_ood_variant_end_to_end(tmp_path):
+def test_baseline_stage_with_the_ood_variant_end_to_end(smoke_pipeline, tmp_path):
     """The stage at a tiny scale: the object heaps' shards, the second GQ-CNN, its Table 2 row
     labelled with what it was trained on, the report's Table 2 showing it; a rerun reuses."""
     from pipeline.artifacts import load_manifest
     from pipeline.baseline import baseline
-    from pipeline.cli import compose
+    from pipeline.dataset.scenes import SceneDataset
     from pipeline.dexnet.planner import DexNetPlanner
-    from pipeline.generate import generate
     from pipeline.report.baseline import BaselineInfo, table2_table
 
-    base = ["experiment=smoke", f"paths.root={tmp_path}", "logging.progress=false",
-            "generate.num_scenes=2", "generate.num_val_scenes=1", "generate.num_test_scenes=1",
-            "generate.scenes_per_shard=2", "generate.workers=1"]
-    generate(compose("generate", base))
+    smoke = smoke_pipeline.copy(tmp_path / "root", tops=("data",))  # its generation artifact
     extra = ["baseline.train_version=none", "baseline.variants=[gqcnn_ood]",
              "baseline.ood.num_scenes=3", "baseline.ood.num_val_scenes=1",
              "baseline.ood.scenes_per_shard=2", "baseline.ood.candidates_per_scene=8",
              "objects.max_count=8", "baseline.workers=1", "baseline.log_samples=1",
              "baseline.epochs=1"]
-    cfg = compose("baseline", base + extra)
+    cfg = smoke.cfg("baseline", *extra)
     out = baseline(cfg)
     m = load_manifest(out)
     assert sorted(p.name for p in (out / "ood").iterdir()) == [
@@ -225,7 +221,7 @@ def test_baseline_stage_with_the_ood_variant_end_to_end(tmp_path):
     assert "objects" in m["config"] and m["config"]["baseline"]["ood"]["num_scenes"] == 3
     rows = {r["planner"]: r for r in m["metrics"]["table2"]["rows"]}
     assert rows["gqcnn_ood"]["name"].endswith("trained on non-box objects")
-    assert rows["gqcnn_ood"]["images"] == 1
+    assert rows["gqcnn_ood"]["images"] == len(SceneDataset(smoke.artifact("generate"), "test"))
     md = table2_table(BaselineInfo.load(out, m)).markdown()
     assert "Dex-Net-style GQ-CNN + CEM, trained on non-box objects" in md
     planner = DexNetPlanner.for_variant(cfg, "gqcnn_ood", np.eye(4), out)

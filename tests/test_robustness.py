@@ -17,24 +17,15 @@ from omegaconf import OmegaConf
 from pipeline.cli import compose
 from pipeline.dataset import SceneDataset
 from pipeline.dataset.storage import read_npz
-from pipeline.generate import generate
-from pipeline.label import label
 from pipeline.robustness import depth_getter
 
-TINY = ["experiment=smoke", "generate.num_scenes=4", "generate.num_val_scenes=2",
-        "generate.num_test_scenes=2", "generate.scenes_per_shard=4", "logging.progress=false"]
-
-
 @pytest.fixture(scope="module")
-def pipelines(tmp_path_factory):
-    root = tmp_path_factory.mktemp("robust")
-    base = TINY + [f"paths.root={root}"]
-    out = {}
-    for kind, extra in (("clean", []), ("noisy", ["sensor=sr300"])):
-        gen = generate(compose("generate", base + extra))
-        lab = label(compose("label", base + [f"label.generate_version={gen.name}"]))
-        out[kind] = (gen, lab)
-    return out
+def pipelines(smoke_pipeline, smoke_pipelines):
+    """{"clean" | "noisy": (generation folder, label folder)}: the session's smoke pipeline and
+    the same heaps rendered through the SR300 model."""
+    noisy = smoke_pipelines("sensor=sr300", stages=("generate", "label"))
+    return {kind: (root.artifact("generate"), root.artifact("label"))
+            for kind, root in (("clean", smoke_pipeline), ("noisy", noisy))}
 
 
 def test_noisy_generation_holds_the_clean_heaps(pipelines):

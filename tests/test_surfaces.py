@@ -13,19 +13,17 @@ from types import SimpleNamespace as NS
 import numpy as np
 import pybullet as p
 import pytest
-from omegaconf import OmegaConf
 
 from conftest import default_config
 from pipeline.camera.geometry import Intrinsics, camera_pose_above_bin, pose_matrix, project
 from pipeline.camera.render import render_depth
-from pipeline.cli import compose
 from pipeline.dataset.scenes import Box
 from pipeline.labelling.surfaces import (
     SurfaceDetectionConfig, aggregate, detect_surfaces, match_surfaces, true_visible_faces,
 )
 from pipeline.labelling.types import Surface
 from pipeline.simulation.heap import build_cell
-from pipeline.simulation.scene import box_pose_world, connect, scene_rng, simulate_scene
+from pipeline.simulation.scene import connect
 
 SR300 = Intrinsics(416, 416, 411.7, 411.7, 207.5, 207.5)
 CAM_HEIGHT = 0.625
@@ -264,18 +262,13 @@ def test_match_surfaces_by_hand():
 
 
 @pytest.fixture(scope="module")
-def smoke_scenes(client):
-    cfg = OmegaConf.to_object(compose("generate", ["experiment=smoke"]))
-    intr = Intrinsics.from_config(cfg.camera)
-    scenes = []
-    for index in range(4):
-        sim = simulate_scene(client, cfg, scene_rng(0, 0, index))
-        T_cam_world = np.linalg.inv(sim.T_world_cam)
-        boxes = [Box(instance=k, type_index=b.type_index, type_name="", size=b.size,
-                     T_world_box=box_pose_world(b), T_cam_box=T_cam_world @ box_pose_world(b))
-                 for k, b in enumerate(sim.boxes, start=1)]
-        scenes.append((sim.depth_m, sim.mask, boxes, intr))
-    return scenes
+def smoke_scenes(smoke_pipeline):
+    """(depth, mask, boxes, intrinsics) of the session pipeline's four training heaps."""
+    from pipeline.dataset.scenes import SceneDataset
+
+    scenes = SceneDataset(smoke_pipeline.artifact("generate"), "train")
+    return [(sc.depth_m, sc.mask, sc.boxes, sc.intrinsics)
+            for sc in (scenes[i] for i in range(len(scenes)))]
 
 
 def test_simulated_heaps_match_truth(smoke_scenes):

@@ -10,32 +10,31 @@ import numpy as np
 import pytest
 import torch
 
+from conftest import smoke_overrides
 from pipeline.artifacts import load_manifest
 from pipeline.cli import compose
 from pipeline.dataset.scenes import SceneDataset
-from pipeline.generate import generate
 from pipeline.dataset.labels import LabelSet
-from pipeline.label import label
 from pipeline.planner.data import DepthShards, GraspDataset, Normalisation, make_loader
 from pipeline.planner.distributed import DistContext, split_batch
 from pipeline.planner.data import epoch_batches
 from pipeline.train import train
 
+# 12 training heaps in shards of 5 (shard boundaries inside the epoch), labels without the
+# robot-level checks (the labels' classes do not matter here).
 SMALL = ("generate.num_scenes=12", "generate.num_val_scenes=2", "generate.num_test_scenes=2",
-         "generate.scenes_per_shard=5", "generate.workers=1")
-
-
-def _cfg(stage, root, *extra):
-    return compose(stage, ["experiment=smoke", f"paths.root={root}", "logging.progress=false",
-                           *SMALL, *extra])
+         "generate.scenes_per_shard=5", "label.robot_checks=false")
 
 
 @pytest.fixture(scope="module")
-def labelled_root(tmp_path_factory):
-    root = tmp_path_factory.mktemp("scaling")
-    generate(_cfg("generate", root))
-    label(_cfg("label", root, "label.workers=1", "label.robot_checks=false"))
-    return root
+def labelled(smoke_pipelines):
+    """The session's generation and label artifacts at this module's scale (read-only)."""
+    return smoke_pipelines(*SMALL, stages=("generate", "label"))
+
+
+@pytest.fixture(scope="module")
+def labelled_root(labelled):
+    return labelled.root
 
 
 def test_split_batch_hand_cases():
@@ -105,14 +104,15 @@ def test_loader_workers_do_not_change_the_batches(labelled_root, tmp_path):
     assert torch.equal(targets["cls"], in_process[0][1]["cls"])
 
 
-def test_torchrun_two_processes_match_one(labelled_root):
+def test_torchrun_two_processes_match_one(labelled, tmp_path):
     """Two gloo processes on the CPU train on the same batches as one process; the result
     differs only through BatchNorm's per-rank statistics and the all-reduce's summation order
     (pipeline.planner.distributed): with 4-image parts, the measured differences are 0.7 % in
     the first step's loss, 2.8 % in the second epoch's training loss and 0.12 % in the validation
     loss; asserted: 2 %, 6 % and 1 %."""
-    overrides = ["experiment=smoke", f"paths.root={labelled_root}", "logging.progress=false",
-                 *SMALL, "train.epochs=2", "train.batch_size=8", "train.log_samples=0"]
+    labelled_root = labelled.copy(tmp_path / "root").root  # the two trainings write into it
+    overrides = smoke_overrides(labelled_root, *SMALL, "train.epochs=2", "train.batch_size=8",
+                                "train.log_samples=0")
     single = load_manifest(train(compose("train", overrides)))
     env = {**os.environ, "PYTHONPATH": os.getcwd()}
     torchrun = [sys.executable, "-m", "torch.distributed.run", "--standalone",
