@@ -20,6 +20,7 @@ versioned artifact ``data/report/<version>/``::
     figures/pr_curve.png          the DCNN's precision–recall curve on the test split
     tables/table2_centre_distance.csv  Table 2: optimal grasp points near surface centres
     tables/planning_time.csv      planning time per image of each planner (wall-clock)
+    tables/run_time.csv           per stage: the wall-clock time its reported artifacts took
     figures/table2_curve.png      Table 2 over the radius (pixels)
     figures/fig10_planners.png    every planner's optimal grasp point on test images (Fig. 10)
     tables/table3_*.csv           Table 3: success, failures, path deviation, timing (wall-clock)
@@ -55,7 +56,7 @@ version that does not exist, or an artifact that does not match, is an error
 (``upstream.resolve_upstream``). ``stage.report`` loops over the sections; ``tables.Table``
 writes a table as Markdown and CSV; ``figures`` draws the figures; ``readme`` assembles the
 README. The labelling throughput and the training timings are run-dependent, so they stay in
-their manifests and are not copied here.
+their manifests; ``run_time`` sums each stage's wall-clock time from them into a volatile table.
 
 Every file in the artifact is a function of the version key alone (no wall-clock times, except
 the ``VOLATILE_FILES``; no absolute paths; PNGs are written without the "Software" metadata), so

@@ -52,6 +52,11 @@ def render_readme(version: str, used: Sequence[Part], parts: Sequence[Part],
         "config, package versions, creation time and file hashes (`make verify` re-checks them).",
         "",
     ]
+    if "run_time" in tables:
+        out += ["How long each stage took to make these artifacts and those they were made from, "
+                "summed from their manifests on the machines that ran them: "
+                "[tables/run_time.csv](tables/run_time.csv) (wall-clock, so it is not part of the "
+                "reproducibility check).", ""]
     for section, info in parts:
         out += section.markdown(info, tables, figures)
     out += ["## Figures", ""]
