@@ -328,6 +328,13 @@ def test_report_is_reproducible_across_roots(root_a: Path, report_a: Path, tmp_p
     files_b = load_manifest(report_b)["files"]
     files_a.pop("log.rrd")
     files_b.pop("log.rrd")
+    # measured wall-clock time, skipped as `make repro-check` skips it (metrics.volatile_files)
+    volatile = load_manifest(report_a)["metrics"]["volatile_files"]
+    assert volatile == load_manifest(report_b)["metrics"]["volatile_files"]
+    assert "tables/run_time.csv" in volatile
+    for rel in volatile:
+        files_a.pop(rel)
+        files_b.pop(rel)
     assert "log.mcap" in files_a and "figures/labels_sample.png" in files_a
     assert {"tables/table1_precision.csv", "figures/pr_curve.png"} <= set(files_a)
     assert files_a == files_b
