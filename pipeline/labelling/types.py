@@ -30,11 +30,14 @@ CLASS_COLORS = {GraspClass.R: (230, 60, 60), GraspClass.L: (60, 200, 60),
 
 
 @dataclass
-class Surface:
-    """One visible planar face of a box, as seen in one depth image.
+class FaceFrame:
+    """The frame of one visible planar face in the camera frame (OpenCV axes, metres).
+
+    The fields the labelling stage's :class:`Surface` (from the instance mask) and the run-time
+    descriptor's ``pipeline.servo.descriptor.SurfaceFeatures`` (from depth alone) share.
 
     Attributes:
-        instance: the box's value in the scene's instance mask (1-based).
+        center_px: (2,) the centre projected to pixel coordinates (u, v): the grasp point g.
         center_cam: (3,) centre of the visible region of the face, in the face's plane, metres.
         normal_cam: (3,) unit normal, pointing towards the camera (``normal_cam @ center_cam < 0``).
         long_axis_cam: (3,) unit vector in the plane along the longer side of the visible region.
@@ -42,19 +45,29 @@ class Surface:
             (``short = normal × long``, a right-handed frame (long, short, normal)).
         long_length: L_l, length of the visible region along ``long_axis_cam``, metres.
         short_length: L_s, along ``short_axis_cam``, metres.
-        center_px: (2,) the centre projected to pixel coordinates (u, v): the grasp point g.
-        num_points: inlier points of the plane fit.
-        area: visible area in the plane, m².
     """
 
-    instance: int
+    center_px: np.ndarray
     center_cam: np.ndarray
     normal_cam: np.ndarray
     long_axis_cam: np.ndarray
     short_axis_cam: np.ndarray
     long_length: float
     short_length: float
-    center_px: np.ndarray
+
+
+@dataclass
+class Surface(FaceFrame):
+    """One visible planar face of a box, as seen in one depth image (a :class:`FaceFrame`).
+
+    Attributes:
+        instance: the box's value in the scene's instance mask (1-based).
+        num_points: inlier points of the plane fit.
+        area: visible area in the plane, m².
+        extra: per-surface facts added by later steps (free-form).
+    """
+
+    instance: int
     num_points: int
     area: float
     extra: dict = field(default_factory=dict)

@@ -111,6 +111,7 @@ from pipeline.camera.geometry import Intrinsics
 from pipeline.config.build import from_section
 from pipeline.labelling.hand import warped_axes
 from pipeline.labelling.surfaces import fit_plane, region_surface
+from pipeline.labelling.types import FaceFrame
 
 MIN_WINDOW_POINTS = 10
 # The reasons ``describe_surface`` gives for finding no surface (see its docstring).
@@ -179,15 +180,12 @@ def descriptor_config(cfg) -> DescriptorConfig:
 
 
 @dataclass
-class SurfaceFeatures:
-    """The descriptor's output for one surface (camera frame, metres; pixels (u, v)).
+class SurfaceFeatures(FaceFrame):
+    """The descriptor's output for one surface: a :class:`~pipeline.labelling.types.FaceFrame`
+    (g' = ``center_px``, the centre on the refined plane, its normal, axes and L_l, L_s of the
+    region's rectangle) and:
 
     Attributes:
-        center_px: (2,) g' = the surface centre projected into the image, (u, v).
-        center_cam: (3,) the surface centre, on the (refined) plane.
-        normal_cam: (3,) unit normal, towards the camera.
-        long_axis_cam, short_axis_cam: (3,) unit in-plane axes (short = normal × long).
-        long_length, short_length: L_l, L_s of the region's rectangle, metres.
         warped_long, warped_short: (3,) ñ_l, ñ_s: the axes rotated by the minimal rotation that
             takes −normal onto the camera's +Z; z component 0, unit.
         plane: (4,) (n̂, D̂) of Eq. 11 (the window fit), n̂ towards the camera, n̂ · P + D̂ = 0.
@@ -196,13 +194,6 @@ class SurfaceFeatures:
         region: (H, W) bool mask of the region.
     """
 
-    center_px: np.ndarray
-    center_cam: np.ndarray
-    normal_cam: np.ndarray
-    long_axis_cam: np.ndarray
-    short_axis_cam: np.ndarray
-    long_length: float
-    short_length: float
     warped_long: np.ndarray
     warped_short: np.ndarray
     plane: np.ndarray
