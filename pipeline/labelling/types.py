@@ -45,6 +45,7 @@ class FaceFrame:
             (``short = normal × long``, a right-handed frame (long, short, normal)).
         long_length: L_l, length of the visible region along ``long_axis_cam``, metres.
         short_length: L_s, along ``short_axis_cam``, metres.
+        area: visible area of the face in its plane, m² (the sum of the pixels' footprints).
     """
 
     center_px: np.ndarray
@@ -54,6 +55,7 @@ class FaceFrame:
     short_axis_cam: np.ndarray
     long_length: float
     short_length: float
+    area: float
 
 
 @dataclass
@@ -63,11 +65,9 @@ class Surface(FaceFrame):
     Attributes:
         instance: the box's value in the scene's instance mask (1-based).
         num_points: inlier points of the plane fit.
-        area: visible area in the plane, m².
         extra: per-surface facts added by later steps (free-form).
     """
 
     instance: int
     num_points: int
-    area: float
     extra: dict = field(default_factory=dict)

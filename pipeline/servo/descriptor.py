@@ -182,15 +182,14 @@ def descriptor_config(cfg) -> DescriptorConfig:
 @dataclass
 class SurfaceFeatures(FaceFrame):
     """The descriptor's output for one surface: a :class:`~pipeline.labelling.types.FaceFrame`
-    (g' = ``center_px``, the centre on the refined plane, its normal, axes and L_l, L_s of the
-    region's rectangle) and:
+    (g' = ``center_px``, the centre on the refined plane, its normal, axes, L_l, L_s of the
+    region's rectangle and the region's area) and:
 
     Attributes:
         warped_long, warped_short: (3,) ñ_l, ñ_s: the axes rotated by the minimal rotation that
             takes −normal onto the camera's +Z; z component 0, unit.
         plane: (4,) (n̂, D̂) of Eq. 11 (the window fit), n̂ towards the camera, n̂ · P + D̂ = 0.
         num_pixels: pixels of the region.
-        area: the region's area on the plane, m² (sum of the pixel footprints).
         region: (H, W) bool mask of the region.
     """
 
@@ -198,7 +197,6 @@ class SurfaceFeatures(FaceFrame):
     warped_short: np.ndarray
     plane: np.ndarray
     num_pixels: int
-    area: float
     region: np.ndarray
 
 
