@@ -211,7 +211,8 @@ def _log_trials(log: StageLog, results: list[TrialResult], intr) -> None:
     """Every logged trial, control step by control step (timeline ``control_step``; the log
     time is simulated time at 30 Hz): the robot's link origins, the camera's pose, g′ and the
     reconstructed surface in the camera frame, the servo errors; per attempt the home depth
-    image (half resolution, under a camera of half-resolution intrinsics) with G_opt."""
+    image (half resolution, under a camera of half-resolution intrinsics) with G_opt; for a
+    trial that ended "no grasp", its last home image (``_log_final_home``)."""
     from types import SimpleNamespace
 
     from pipeline.camera.geometry import quat_from_axes
@@ -221,7 +222,7 @@ def _log_trials(log: StageLog, results: list[TrialResult], intr) -> None:
                            cy=(intr.cy + 0.5) / 2 - 0.5)
     tick = 0
     for r in results:
-        if not r.trace:
+        if not r.trace and not r.final_home:
             continue
         prefix = f"trials/{r.planner}/trial_{r.trial}"
         for s in r.trace:
@@ -257,6 +258,44 @@ def _log_trials(log: StageLog, results: list[TrialResult], intr) -> None:
             log.log_text("log", f"{r.planner} trial {r.trial} attempt {a.index}: {a.pattern} at "
                                 f"({a.g_opt[0]:.0f}, {a.g_opt[1]:.0f}) → {a.outcome} "
                                 f"({a.servo_steps} servo steps, {a.sim_s:.2f} s simulated)")
+        if r.final_home:
+            log.set_time(sequences={"control_step": tick},
+                         clock_ns=int(round(tick * 1e9 / 30.0)))
+            tick += 1
+            _log_final_home(log, r, intr, prefix)
+
+
+def _log_final_home(log: StageLog, r: TrialResult, intr, prefix: str) -> None:
+    """The home image on which trial ``r`` ended "no grasp", at full resolution (so the planner
+    can be run on it again from the log): ``<prefix>/no_grasp`` (camera; MCAP frame
+    ``no_grasp_camera``), its ``depth``, the boxes left (world frame) and the planner's
+    candidates (each rejected by the run-time check; none: the planner proposed nothing)."""
+    f = r.final_home
+    log.log_camera(f"{prefix}/no_grasp", intr, f["T_world_cam"], frame_id="no_grasp_camera")
+    log.log_depth(f"{prefix}/no_grasp/depth", f["depth_m"], frame_id="no_grasp_camera")
+    boxes = f["boxes_left"]
+    if boxes:
+        log.log_points(f"{prefix}/no_grasp/boxes_left",
+                       np.array([b["position"] for b in boxes], np.float64),
+                       np.tile(np.array([[255, 140, 0]], np.uint8), (len(boxes), 1)),
+                       frame_id="world")
+    uv = f["candidates_px"]
+    if len(uv):
+        d = f["depth_m"]
+        rows = np.clip(np.round(uv[:, 1]).astype(int), 0, d.shape[0] - 1)
+        cols = np.clip(np.round(uv[:, 0]).astype(int), 0, d.shape[1] - 1)
+        z = d[rows, cols].astype(np.float64)
+        pts = np.stack([(uv[:, 0] - intr.cx) / intr.fx * z, (uv[:, 1] - intr.cy) / intr.fy * z,
+                        z], axis=1)
+        log.log_points(f"{prefix}/no_grasp/candidates", pts,
+                       np.tile(np.array([[255, 40, 40]], np.uint8), (len(uv), 1)),
+                       frame_id="no_grasp_camera")
+    left = ", ".join(f"{b['type']} at ({b['position'][0]:+.3f}, {b['position'][1]:+.3f}, "
+                     f"{b['position'][2]:+.3f}) m" for b in boxes) or "none"
+    ng = r.no_grasp
+    log.log_text("log", f"{r.planner} trial {r.trial} ended no grasp: {ng.get('candidates', 0)} "
+                        f"candidates, rejected {ng.get('rejected', {})}; boxes left: {left}",
+                 level="WARN")
 
 
 # ------------------------------------------------------------------------------ the stage

@@ -85,6 +85,17 @@ def test_a_reachable_target_is_chosen_and_a_rejected_one_never(runner):
     assert result.end == "no_grasp" and result.attempts == []
     assert result.no_grasp == {"boxes_left": 1, "candidates": 1, "checked": 1,
                                "rejected": {"collision": 3}}
+    assert result.final_home == {}  # kept only with the trace (evaluate.log_trials)
+    runner.plans.append([bad])
+    traced = runner.run_trial(0, np.random.default_rng(0), np.random.default_rng(1),
+                              keep_trace=True)
+    home = traced.final_home
+    assert home["depth_m"].shape == frame.depth_m.shape
+    np.testing.assert_allclose(home["T_world_cam"], frame.T_world_cam, atol=1e-3)  # home, by IK
+    np.testing.assert_allclose(home["candidates_px"], [[wu, wv]])
+    (left,) = home["boxes_left"]
+    assert left["body"] == body and left["type"] == runner.cell.boxes[body]["type"]
+    np.testing.assert_allclose(left["position"], runner.cell.box_pose(body)[0])
 
 
 def test_a_retry_after_a_failure_differs(runner):

@@ -90,3 +90,41 @@ def test_evaluate_rejects_unknown_planner(smoke_cfg):
     cfg = smoke_cfg("evaluate", "evaluate.planners=[dcnn,magic]")
     with pytest.raises(ValueError, match="magic"):
         evaluate(cfg)
+
+
+def test_a_no_grasp_end_logs_its_home_image(tmp_path):
+    """The last home image of a trial that ended "no grasp" is in the MCAP log at full
+    resolution, with the boxes left (world frame) and the candidates back-projected: a candidate
+    at the principal point, 0.5 m away, is the point (0, 0, 0.5) of the camera frame."""
+    from mcap.reader import make_reader
+    from mcap_protobuf.decoder import DecoderFactory
+
+    from pipeline.camera.geometry import Intrinsics
+    from pipeline.evaluate import _log_trials
+    from pipeline.picking.trial import TrialResult
+    from pipeline.tracking import StageLog
+
+    intr = Intrinsics(width=8, height=6, fx=10.0, fy=10.0, cx=3.5, cy=2.5)
+    depth = np.full((6, 8), 0.5, np.float32)
+    home = {"depth_m": depth, "T_world_cam": np.eye(4), "candidates_px": np.array([[3.5, 2.5]]),
+            "boxes_left": [{"body": 7, "type": "cube", "position": np.array([0.1, -0.2, 0.03])}]}
+    result = TrialResult(trial=3, planner="dcnn", boxes=12, picked=11, end="no_grasp",
+                         attempts=[], no_grasp={"boxes_left": 1, "candidates": 1, "checked": 1,
+                                                "rejected": {"collision": 1}},
+                         final_home=home)
+    with StageLog(tmp_path, "evaluate", "rec") as log:
+        _log_trials(log, [result], intr)
+    prefix = "/trials/dcnn/trial_3/no_grasp"
+    with open(tmp_path / "log.mcap", "rb") as f:
+        msgs = {ch.topic: dec for _, ch, _, dec in
+                make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages()}
+    img = msgs[f"{prefix}/depth"]
+    assert (img.width, img.height, img.frame_id) == (8, 6, "no_grasp_camera")
+    np.testing.assert_array_equal(np.frombuffer(img.data, "<f4").reshape(6, 8), depth)
+    boxes = np.frombuffer(msgs[f"{prefix}/boxes_left"].data, [("xyz", "<f4", 3), ("c", "u1", 4)])
+    np.testing.assert_allclose(boxes["xyz"], [[0.1, -0.2, 0.03]], atol=1e-7)
+    cands = np.frombuffer(msgs[f"{prefix}/candidates"].data, [("xyz", "<f4", 3), ("c", "u1", 4)])
+    np.testing.assert_allclose(cands["xyz"], [[0.0, 0.0, 0.5]], atol=1e-7)
+    assert msgs[f"{prefix}/candidates"].frame_id == "no_grasp_camera"
+    text = msgs["/log"].message
+    assert "trial 3 ended no grasp: 1 candidates" in text and "cube at (+0.100, -0.200" in text

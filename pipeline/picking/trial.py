@@ -111,6 +111,11 @@ class TrialResult:
     # pairs per reason (the robot check's NG reason, "descriptor" when it found no surface,
     # "repeat" for a retry of a failed plan). Empty for other ends.
     no_grasp: dict = field(default_factory=dict)
+    # end "no_grasp" of a trial with a kept trace: the home image the planner found nothing on,
+    # for the logs. ``depth_m``: (H, W) float32 metres, 0 = no data; ``T_world_cam``: (4, 4);
+    # ``candidates_px``: (K, 2) the candidates' (u, v), pixels; ``boxes_left``: one
+    # {"body", "type", "position"} per box in the bin (position: (3,) world, metres).
+    final_home: dict = field(default_factory=dict)
 
     @property
     def sim_s(self) -> float:
@@ -737,6 +742,7 @@ class PickRunner:
         trace: list[dict] | None = [] if keep_trace else None
         end = "max_attempts"
         no_grasp: dict = {}
+        final_home: dict = {}
         for index in range(int(ev.max_attempts_per_trial)):
             if not self.cell.boxes_in_bin():
                 end = "bin_empty"
@@ -753,6 +759,8 @@ class PickRunner:
                             "candidates": len(cands),
                             "checked": min(len(cands), int(ev.max_candidates_checked)),
                             "rejected": dict(sorted(rejected.items()))}
+                if trace is not None:
+                    final_home = self._final_home(frame, cands)
                 break
             cand, pattern, x_world, predicted, sites = chosen
             target, point = self._target_of(frame, cand)
@@ -772,4 +780,17 @@ class PickRunner:
                 end = "bin_empty"
         picked = sum(a.outcome == "success" for a in attempts)
         return TrialResult(trial=trial, planner=self.name, boxes=boxes, picked=picked, end=end,
-                           attempts=attempts, trace=trace or [], no_grasp=no_grasp)
+                           attempts=attempts, trace=trace or [], no_grasp=no_grasp,
+                           final_home=final_home)
+
+    def _final_home(self, frame: Frame, cands: list) -> dict:
+        """``TrialResult.final_home`` of the home image ``frame`` with ``cands``."""
+        boxes = []
+        for body in self.cell.boxes_in_bin():
+            pos, _ = p.getBasePositionAndOrientation(body, physicsClientId=self.cell.client)
+            boxes.append({"body": int(body), "type": str(self.cell.boxes[body]["type"]),
+                          "position": np.asarray(pos, np.float64)})
+        uv = np.array([[float(c.u), float(c.v)] for c in cands], np.float64).reshape(-1, 2)
+        return {"depth_m": np.asarray(frame.depth_m, np.float32),
+                "T_world_cam": np.asarray(frame.T_world_cam, np.float64),
+                "candidates_px": uv, "boxes_left": boxes}
