@@ -83,8 +83,11 @@ def test_a_reachable_target_is_chosen_and_a_rejected_one_never(runner):
     runner.cell.reset = lambda rng, count: None  # the trial keeps this heap
     result = runner.run_trial(0, np.random.default_rng(0), np.random.default_rng(1))
     assert result.end == "no_grasp" and result.attempts == []
+    # the labels on that image hold a grasp the check passes (the box's top face): the planner's
+    # perception lost the box, not execution (evaluate.label_no_grasp)
     assert result.no_grasp == {"boxes_left": 1, "candidates": 1, "checked": 1,
-                               "rejected": {"collision": 3}}
+                               "rejected": {"collision": 3}, "label_candidates": 1,
+                               "label_executable": True}
     assert result.final_home == {}  # kept only with the trace (evaluate.log_trials)
     runner.plans.append([bad])
     traced = runner.run_trial(0, np.random.default_rng(0), np.random.default_rng(1),
@@ -385,3 +388,22 @@ def test_pattern_fits_by_the_hand_level_rule(smoke_cfg):
     assert pattern_fits(SimpleNamespace(**small, area=0.000625), "L", hand)
     assert not pattern_fits(SimpleNamespace(**small, area=0.0003), "L", hand)
     assert not pattern_fits(SimpleNamespace(**small, area=0.000625), "B", hand)
+
+
+def test_the_labels_are_asked_only_when_wanted(smoke_cfg):
+    """``evaluate.label_no_grasp=false``: a "no grasp" end records the planner's figures alone;
+    the oracle's own trials are never asked (it is the labels)."""
+    from pipeline.picking.trial import PickRunner
+
+    r = _one_box_runner(smoke_cfg, "medium", [0.145, 0.092, 0.052])
+    try:
+        r.cell.reset = lambda rng, count: None
+        r.cfg.evaluate.label_no_grasp = False
+        off = r.run_trial(0, np.random.default_rng(0), np.random.default_rng(1))
+        assert off.end == "no_grasp" and "label_executable" not in off.no_grasp
+        r.cfg.evaluate.label_no_grasp = True
+        oracle = PickRunner(r.cfg, r.cell, lambda d, i, rng: [], "oracle")
+        res = oracle.run_trial(0, np.random.default_rng(0), np.random.default_rng(1))
+        assert res.end == "no_grasp" and "label_executable" not in res.no_grasp
+    finally:
+        r.cell.close()

@@ -50,15 +50,19 @@ def test_table3_rows_and_failures():
 
 def test_no_grasp_table_sums_the_no_grasp_endings(tmp_path):
     """Two DCNN trials ended with no grasp (2 + 1 boxes left; 0 + 3 candidates, of which 2
-    collide and 1 repeats a failure), one ended with the bin empty; the oracle has none."""
+    collide and 1 repeats a failure), one ended with the bin empty; the oracle has none. The
+    labels held an executable grasp in the first (its 2 boxes: perception lost them), not in the
+    second; the oracle was not asked (—, empty in the CSV)."""
     import json
 
     trials = [
         {"planner": "dcnn", "end": "no_grasp",
-         "no_grasp": {"boxes_left": 2, "candidates": 0, "checked": 0, "rejected": {}}},
+         "no_grasp": {"boxes_left": 2, "candidates": 0, "checked": 0, "rejected": {},
+                      "label_candidates": 1, "label_executable": True}},
         {"planner": "dcnn", "end": "no_grasp",
          "no_grasp": {"boxes_left": 1, "candidates": 3, "checked": 3,
-                      "rejected": {"collision": 2, "repeat": 1}}},
+                      "rejected": {"collision": 2, "repeat": 1},
+                      "label_candidates": 2, "label_executable": False}},
         {"planner": "dcnn", "end": "bin_empty"},
         {"planner": "oracle", "end": "bin_empty"},
     ]
@@ -66,8 +70,10 @@ def test_no_grasp_table_sums_the_no_grasp_endings(tmp_path):
     info = ArtifactInfo(tmp_path, {"metrics": {"table3": [{"planner": "dcnn"},
                                                           {"planner": "oracle"}]}})
     assert no_grasp_table(info).csv_text().splitlines() == [
-        "planner,trials,boxes left,candidates,rejected: collision,rejected: repeat",
-        "dcnn,2,3,3,2,1", "oracle,0,0,0,0,0"]
+        "planner,trials,boxes left,candidates,rejected: collision,rejected: repeat,"
+        "trials where the labels had a grasp,boxes left by those trials",
+        "dcnn,2,3,3,2,1,1,2", "oracle,0,0,0,0,0,,"]
+    assert "| oracle | 0 | 0 | 0 | 0 | 0 | — | — |" in no_grasp_table(info).markdown()
 
 
 def test_ablation_table_by_hand():

@@ -469,6 +469,7 @@ class EvaluateConfig:
     check_hand_fit: bool = MISSING  # the run-time check tests the pattern's cups on the surface
     single_cup_fallback: bool = MISSING  # a rejected B is tried with L, then R
     min_area_ratio: float = MISSING  # 0: off (paper); 1.2: Sec. 8.4's surface-area safety check
+    label_no_grasp: bool = MISSING  # a "no grasp" end also asks the labels on that frame
     train_version: str = MISSING
     baseline_version: str = MISSING
     num_trials: int = MISSING

@@ -109,7 +109,9 @@ class TrialResult:
     # end "no_grasp": why. ``candidates``: the planner's candidates at home (after the area
     # check), ``checked``: how many the selection looked at, ``rejected``: (candidate, pattern)
     # pairs per reason (the robot check's NG reason, "descriptor" when it found no surface,
-    # "repeat" for a retry of a failed plan). Empty for other ends.
+    # "repeat" for a retry of a failed plan); with evaluate.label_no_grasp, for a planner
+    # other than the oracle, ``label_candidates`` and ``label_executable``
+    # (``PickRunner._labels_at_no_grasp``). Empty for other ends.
     no_grasp: dict = field(default_factory=dict)
     # end "no_grasp" of a trial with a kept trace: the home image the planner found nothing on,
     # for the logs. ``depth_m``: (H, W) float32 metres, 0 = no data; ``T_world_cam``: (4, 4);
@@ -207,6 +209,7 @@ class PickRunner:
         self.gripper_factory = lambda: SuctionGripper(cell.client, cell.robot, self.suction_cfg,
                                                       float(cfg.hand.cup_offset))
         self._place_q: np.ndarray | None = None
+        self._oracle = None  # the labels' planner of ``_labels_at_no_grasp``, made when first needed
         # wall time of the parts of a control step (seconds, one entry per call)
         self.timings: dict[str, list[float]] = {
             "descriptor_s": [], "control_step_s": [], "render_s": [], "control_law_s": [],
@@ -759,6 +762,8 @@ class PickRunner:
                             "candidates": len(cands),
                             "checked": min(len(cands), int(ev.max_candidates_checked)),
                             "rejected": dict(sorted(rejected.items()))}
+                if self.name != "oracle" and bool(ev.label_no_grasp):
+                    no_grasp.update(self._labels_at_no_grasp(frame, failed))
                 if trace is not None:
                     final_home = self._final_home(frame, cands)
                 break
@@ -782,6 +787,23 @@ class PickRunner:
         return TrialResult(trial=trial, planner=self.name, boxes=boxes, picked=picked, end=end,
                            attempts=attempts, trace=trace or [], no_grasp=no_grasp,
                            final_home=final_home)
+
+    def _labels_at_no_grasp(self, frame: Frame, failed: list[dict]) -> dict:
+        """For a planner's "no grasp" end (``evaluate.label_no_grasp``): the labelling stage's
+        graspable points on the same home frame (the oracle's candidates,
+        ``pipeline.picking.oracle``, after the area check) and whether one of them passes the
+        same selection (run-time check and retry memory: ``select``). ``label_executable`` true:
+        the labels hold a grasp the robot would have executed, so the planner's perception lost
+        the box; false: execution could not take any labelled point either. A diagnosis only: it
+        runs after the trial has ended and never changes what the robot does."""
+        if self._oracle is None:
+            from pipeline.picking.oracle import OraclePlanner
+
+            self._oracle = OraclePlanner(self.cfg, self.cell)
+        labels = self._large_enough(frame, self._oracle(frame.depth_m, self.cell.intrinsics,
+                                                        None, frame=frame))
+        executable = bool(labels) and self.select(frame, labels, failed) is not None
+        return {"label_candidates": len(labels), "label_executable": executable}
 
     def _final_home(self, frame: Frame, cands: list) -> dict:
         """``TrialResult.final_home`` of the home image ``frame`` with ``cands``."""

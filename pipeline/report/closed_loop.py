@@ -92,7 +92,10 @@ def failures_table(info: EvaluateInfo) -> Table:
 def no_grasp_table(info: EvaluateInfo) -> Table:
     """The trials that ended with "no grasp", per planner (from ``trials.json``): how many, the
     boxes they left in the bin, the planner's candidates at that last home image, and the
-    (candidate, pattern) pairs the run-time check rejected there, per reason."""
+    (candidate, pattern) pairs the run-time check rejected there, per reason; then, where the
+    evaluation asked the labels on that image (``evaluate.label_no_grasp``), in how many of the
+    trials the labels held a grasp that passed the same check (perception lost the boxes) and
+    the boxes those trials left. Not asked (the oracle itself, or the option off): —."""
     import json
 
     trials = json.loads((info.folder / "trials.json").read_text()) \
@@ -100,13 +103,18 @@ def no_grasp_table(info: EvaluateInfo) -> Table:
     ends = [t for t in trials if t.get("end") == "no_grasp" and t.get("no_grasp")]
     reasons = sorted({k for t in ends for k in t["no_grasp"].get("rejected", {})})
     headers = ["planner", "trials", "boxes left", "candidates",
-               *(f"rejected: {k}" for k in reasons)]
+               *(f"rejected: {k}" for k in reasons),
+               "trials where the labels had a grasp", "boxes left by those trials"]
     rows = []
     for r in info.metrics["table3"]:
         mine = [t["no_grasp"] for t in ends if t["planner"] == r["planner"]]
+        asked = [n for n in mine if "label_executable" in n]
+        lost = [n for n in asked if n["label_executable"]]
         rows.append([r["planner"], len(mine), sum(int(n["boxes_left"]) for n in mine),
                      sum(int(n["candidates"]) for n in mine),
-                     *(sum(int(n.get("rejected", {}).get(k, 0)) for n in mine) for k in reasons)])
+                     *(sum(int(n.get("rejected", {}).get(k, 0)) for n in mine) for k in reasons),
+                     len(lost) if asked else None,
+                     sum(int(n["boxes_left"]) for n in lost) if asked else None])
     return Table("table3_no_grasp", headers, rows)
 
 
@@ -161,7 +169,10 @@ def render_evaluate(info: EvaluateInfo | None, tables: dict[str, Table]) -> list
         "at that home image, and why the run-time check rejected them (a robot-level NG reason; "
         "`descriptor`: no surface at the point; `hand_fit`: the pattern's cups do not lie on "
         "the surface; `repeat`: a retry of a failed plan; docs/closed_loop.md). Zero candidates: "
-        "the planner proposed nothing.",
+        "the planner proposed nothing. The last two columns ask the labelling stage's labels on "
+        "the same home image (`evaluate.label_no_grasp`): a trial counts when one of their "
+        "graspable points passes the same check, so perception, not execution, lost its "
+        "boxes; the other trials' boxes no labelled grasp could take (— where not asked).",
         "",
         tables["table3_no_grasp"].markdown(),
         "The run-time check predicts the servo's camera path from home on the surface it "
