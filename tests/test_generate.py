@@ -153,9 +153,10 @@ def test_artifact_and_loader(smoke_cfg, tmp_path):
     assert folder == (tmp_path / "data" / "generate" / folder.name)
     assert (tmp_path / "data" / "generate" / "latest").resolve() == folder.resolve()
     manifest = load_manifest(folder)
-    for key in ("stage", "version", "created", "config", "upstream", "code", "packages", "seed",
-                "files", "metrics", "timings"):
+    for key in ("stage", "version", "created", "config", "upstream", "code", "packages",
+                "platform", "seed", "files", "metrics", "timings"):
         assert key in manifest
+    assert set(manifest["platform"]) == {"machine", "cpu", "system", "libc"}
     assert manifest["version"] == folder.name
     assert set(manifest["files"]) >= {"camera.json", "index.json", "log.rrd", "log.mcap",
                                       "scenes/train-00000.npz", "scenes/train-00001.npz",

@@ -141,6 +141,28 @@ def package_versions() -> dict[str, str]:
 
 
 @lru_cache(maxsize=1)
+def platform_info() -> dict[str, str]:
+    """The machine an artifact was made on: architecture, CPU model (``/proc/cpuinfo``'s first
+    ``model name``, "" where there is none), operating system and C library. Not part of any
+    version: the same code and config name the same artifact everywhere, but floating-point
+    results (and with them the chaotic physics of a heap) can differ between CPUs
+    (docs/artifacts.md, "Across machines"), and this says which machine made which bytes."""
+    import platform
+
+    cpu = ""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    libc = " ".join(platform.libc_ver()).strip()
+    return {"machine": platform.machine(), "cpu": cpu or platform.processor(),
+            "system": f"{platform.system()} {platform.release()}", "libc": libc}
+
+
+@lru_cache(maxsize=1)
 def git_state() -> dict[str, object]:
     """``{"commit": sha or None, "dirty": bool or None}`` of the repository holding the code."""
 

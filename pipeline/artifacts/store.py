@@ -65,7 +65,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping, Sequence, TypeVar
 
-from pipeline.artifacts.fingerprint import git_state, package_versions, sha256_file, source_hash
+from pipeline.artifacts.fingerprint import (git_state, package_versions, platform_info, sha256_file,
+                                            source_hash)
 
 T = TypeVar("T")
 S = TypeVar("S")
@@ -429,6 +430,7 @@ class ArtifactWriter:
             "upstream": run.upstream,
             "code": {**git_state(), "source_hash": source_hash(run.stage)},
             "packages": package_versions(),
+            "platform": platform_info(),
             "seed": run.seed,
             "files": _hash_files(run.work_dir),
             "metrics": run.metrics,
