@@ -94,8 +94,8 @@ def test_area_check_drops_surfaces_barely_larger_than_the_cup():
     big.u = big.v = big_b.u = big_b.v = 94.5
     big_b.grasp_class = GraspClass.B
     cands = [small, big, big_b]
-    assert PickRunner._large_enough(_runner(0.0, intr), frame, cands) == cands  # off: unchanged
-    assert names(PickRunner._large_enough(_runner(1.0, intr), frame, cands)) == ["small", "big"]
-    assert names(PickRunner._large_enough(_runner(1.2, intr), frame, cands)) == ["big"]
+    assert PickRunner.large_enough(_runner(0.0, intr), frame, cands) == cands  # off: unchanged
+    assert names(PickRunner.large_enough(_runner(1.0, intr), frame, cands)) == ["small", "big"]
+    assert names(PickRunner.large_enough(_runner(1.2, intr), frame, cands)) == ["big"]
     # 18-mm cups (2.54 cm²): 1.2 × two cups = 6.1 cm², every top passes
-    assert PickRunner._large_enough(_runner(1.2, intr, 0.018), frame, cands) == cands
+    assert PickRunner.large_enough(_runner(1.2, intr, 0.018), frame, cands) == cands

@@ -56,6 +56,7 @@ import pybullet as p
 
 from pipeline.camera.geometry import Intrinsics, world_to_camera
 from pipeline.picking.cell import Frame, PickCell
+from pipeline.picking.diagnosis import final_home_record, labels_at_no_grasp
 
 OUTCOMES = ("success", "no_seal", "dropped", "collision", "joint_limits", "timeout",
             "lost_target")
@@ -111,12 +112,10 @@ class TrialResult:
     # pairs per reason (the robot check's NG reason, "descriptor" when it found no surface,
     # "repeat" for a retry of a failed plan); with evaluate.label_no_grasp, for a planner
     # other than the oracle, ``label_candidates`` and ``label_executable``
-    # (``PickRunner._labels_at_no_grasp``). Empty for other ends.
+    # (``pipeline.picking.diagnosis.labels_at_no_grasp``). Empty for other ends.
     no_grasp: dict = field(default_factory=dict)
     # end "no_grasp" of a trial with a kept trace: the home image the planner found nothing on,
-    # for the logs. ``depth_m``: (H, W) float32 metres, 0 = no data; ``T_world_cam``: (4, 4);
-    # ``candidates_px``: (K, 2) the candidates' (u, v), pixels; ``boxes_left``: one
-    # {"body", "type", "position"} per box in the bin (position: (3,) world, metres).
+    # for the logs (``pipeline.picking.diagnosis.final_home_record``); else empty.
     final_home: dict = field(default_factory=dict)
 
     @property
@@ -209,7 +208,7 @@ class PickRunner:
         self.gripper_factory = lambda: SuctionGripper(cell.client, cell.robot, self.suction_cfg,
                                                       float(cfg.hand.cup_offset))
         self._place_q: np.ndarray | None = None
-        self._oracle = None  # the labels' planner of ``_labels_at_no_grasp``, made when first needed
+        self.oracle = None  # the labels' planner of ``diagnosis.labels_at_no_grasp``, when needed
         # wall time of the parts of a control step (seconds, one entry per call)
         self.timings: dict[str, list[float]] = {
             "descriptor_s": [], "control_step_s": [], "render_s": [], "control_law_s": [],
@@ -231,7 +230,7 @@ class PickRunner:
             return ["B"]
         return [preferred, {"L": "R", "R": "L"}[preferred]]
 
-    def _large_enough(self, frame: Frame, cands: list) -> list:
+    def large_enough(self, frame: Frame, cands: list) -> list:
         """With ``evaluate.min_area_ratio`` > 0 (paper Sec. 8.4's safety constraint), the DCNN's
         candidates among the first ``max_candidates_checked`` whose surface (the descriptor's
         region grown at the point) covers at least that ratio times the active cups' area
@@ -752,7 +751,7 @@ class PickRunner:
                 break
             frame, cands, planning_s = self.plan_at_home(rng_plan)
             t0 = time.perf_counter()
-            cands = self._large_enough(frame, cands)
+            cands = self.large_enough(frame, cands)
             rejected: dict[str, int] = {}
             chosen = self.select(frame, cands, failed, rejected) if cands else None
             planning_s += time.perf_counter() - t0  # the run-time check is planning time too
@@ -763,9 +762,9 @@ class PickRunner:
                             "checked": min(len(cands), int(ev.max_candidates_checked)),
                             "rejected": dict(sorted(rejected.items()))}
                 if self.name != "oracle" and bool(ev.label_no_grasp):
-                    no_grasp.update(self._labels_at_no_grasp(frame, failed))
+                    no_grasp.update(labels_at_no_grasp(self, frame, failed))
                 if trace is not None:
-                    final_home = self._final_home(frame, cands)
+                    final_home = final_home_record(self.cell, frame, cands)
                 break
             cand, pattern, x_world, predicted, sites = chosen
             target, point = self._target_of(frame, cand)
@@ -787,32 +786,3 @@ class PickRunner:
         return TrialResult(trial=trial, planner=self.name, boxes=boxes, picked=picked, end=end,
                            attempts=attempts, trace=trace or [], no_grasp=no_grasp,
                            final_home=final_home)
-
-    def _labels_at_no_grasp(self, frame: Frame, failed: list[dict]) -> dict:
-        """For a planner's "no grasp" end (``evaluate.label_no_grasp``): the labelling stage's
-        graspable points on the same home frame (the oracle's candidates,
-        ``pipeline.picking.oracle``, after the area check) and whether one of them passes the
-        same selection (run-time check and retry memory: ``select``). ``label_executable`` true:
-        the labels hold a grasp the robot would have executed, so the planner's perception lost
-        the box; false: execution could not take any labelled point either. A diagnosis only: it
-        runs after the trial has ended and never changes what the robot does."""
-        if self._oracle is None:
-            from pipeline.picking.oracle import OraclePlanner
-
-            self._oracle = OraclePlanner(self.cfg, self.cell)
-        labels = self._large_enough(frame, self._oracle(frame.depth_m, self.cell.intrinsics,
-                                                        None, frame=frame))
-        executable = bool(labels) and self.select(frame, labels, failed) is not None
-        return {"label_candidates": len(labels), "label_executable": executable}
-
-    def _final_home(self, frame: Frame, cands: list) -> dict:
-        """``TrialResult.final_home`` of the home image ``frame`` with ``cands``."""
-        boxes = []
-        for body in self.cell.boxes_in_bin():
-            pos, _ = p.getBasePositionAndOrientation(body, physicsClientId=self.cell.client)
-            boxes.append({"body": int(body), "type": str(self.cell.boxes[body]["type"]),
-                          "position": np.asarray(pos, np.float64)})
-        uv = np.array([[float(c.u), float(c.v)] for c in cands], np.float64).reshape(-1, 2)
-        return {"depth_m": np.asarray(frame.depth_m, np.float32),
-                "T_world_cam": np.asarray(frame.T_world_cam, np.float64),
-                "candidates_px": uv, "boxes_left": boxes}
