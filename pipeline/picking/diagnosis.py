@@ -27,14 +27,18 @@ def labels_at_no_grasp(runner, frame: Frame, failed: list[dict]) -> dict:
     Returns ``{"label_candidates": int, "label_executable": bool}``; ``label_executable`` true:
     the labels hold a grasp the robot would have executed, so the planner's perception lost the
     boxes; false: execution could not take any labelled point either. The oracle planner is made
-    once per runner (``runner.oracle``)."""
+    once per runner (``runner.oracle``); the wall times the check adds to ``runner.timings`` are
+    dropped."""
     if runner.oracle is None:
         from pipeline.picking.oracle import OraclePlanner
 
         runner.oracle = OraclePlanner(runner.cfg, runner.cell)
+    lengths = {k: len(v) for k, v in runner.timings.items()}
     labels = runner.large_enough(frame, runner.oracle(frame.depth_m, runner.cell.intrinsics,
                                                       None, frame=frame))
     executable = bool(labels) and runner.select(frame, labels, failed) is not None
+    for k, n in lengths.items():  # the diagnosis is not the planner's or the servo's time
+        del runner.timings[k][n:]
     return {"label_candidates": len(labels), "label_executable": executable}
 
 
