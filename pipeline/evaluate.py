@@ -215,7 +215,7 @@ def _log_trials(log: StageLog, results: list[TrialResult], intr) -> None:
     trial that ended "no grasp", its last home image (``_log_final_home``)."""
     from types import SimpleNamespace
 
-    from pipeline.camera.geometry import quat_from_axes
+    from pipeline.camera.geometry import backproject_pixels, quat_from_axes
 
     half = SimpleNamespace(width=intr.width // 2, height=intr.height // 2, fx=intr.fx / 2,
                            fy=intr.fy / 2, cx=(intr.cx + 0.5) / 2 - 0.5,
@@ -239,7 +239,7 @@ def _log_trials(log: StageLog, results: list[TrialResult], intr) -> None:
                 log.log_depth(f"{prefix}/home_camera/depth", d, frame_id="home_camera")
                 u, v = s["g_opt"]
                 z = float(s["depth"][int(round(v)), int(round(u))])
-                g = np.array([[(u - intr.cx) / intr.fx * z, (v - intr.cy) / intr.fy * z, z]])
+                g = backproject_pixels(np.array([[u, v]]), np.array([z]), intr)
                 log.log_points(f"{prefix}/home_camera/g_opt", g, np.array([[255, 40, 40]],
                                                                            np.uint8),
                                frame_id="home_camera")
@@ -270,6 +270,8 @@ def _log_final_home(log: StageLog, r: TrialResult, intr, prefix: str) -> None:
     can be run on it again from the log): ``<prefix>/no_grasp`` (camera; MCAP frame
     ``no_grasp_camera``), its ``depth``, the boxes left (world frame) and the planner's
     candidates (each rejected by the run-time check; none: the planner proposed nothing)."""
+    from pipeline.camera.geometry import backproject_pixels
+
     f = r.final_home
     log.log_camera(f"{prefix}/no_grasp", intr, f["T_world_cam"], frame_id="no_grasp_camera")
     log.log_depth(f"{prefix}/no_grasp/depth", f["depth_m"], frame_id="no_grasp_camera")
@@ -284,9 +286,7 @@ def _log_final_home(log: StageLog, r: TrialResult, intr, prefix: str) -> None:
         d = f["depth_m"]
         rows = np.clip(np.round(uv[:, 1]).astype(int), 0, d.shape[0] - 1)
         cols = np.clip(np.round(uv[:, 0]).astype(int), 0, d.shape[1] - 1)
-        z = d[rows, cols].astype(np.float64)
-        pts = np.stack([(uv[:, 0] - intr.cx) / intr.fx * z, (uv[:, 1] - intr.cy) / intr.fy * z,
-                        z], axis=1)
+        pts = backproject_pixels(uv, d[rows, cols], intr)
         log.log_points(f"{prefix}/no_grasp/candidates", pts,
                        np.tile(np.array([[255, 40, 40]], np.uint8), (len(uv), 1)),
                        frame_id="no_grasp_camera")

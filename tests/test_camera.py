@@ -9,7 +9,8 @@ import pybullet as p
 import pytest
 
 from pipeline.camera.geometry import (
-    Intrinsics, backproject, camera_pose_above_bin, pose_matrix, project, world_to_camera,
+    Intrinsics, backproject, backproject_pixels, camera_pose_above_bin, pose_matrix, project,
+    world_to_camera,
 )
 from pipeline.camera.render import render_depth
 from pipeline.simulation.heap import build_cell
@@ -34,6 +35,16 @@ def test_project_backproject_by_hand():
     assert pts.shape == (416, 416, 3)
     # Pixel (u=0, v=415): x = (0 - 207.5) / 411.7 * 0.5, y = (415 - 207.5) / 411.7 * 0.5.
     assert pts[415, 0] == pytest.approx([-0.252004, 0.252004, 0.5], abs=1e-6)
+
+
+def test_backproject_pixels_by_hand():
+    """The same point as above back from its pixel (289.84, 248.67) at z = 0.5 m, and a batch
+    of two: the principal point at 1 m is (0, 0, 1); pixel (0, 415) at 0.5 m as above."""
+    assert backproject_pixels([289.84, 248.67], 0.5, SR300) == pytest.approx([0.1, 0.05, 0.5])
+    pts = backproject_pixels(np.array([[207.5, 207.5], [0.0, 415.0]]), np.array([1.0, 0.5]),
+                             SR300)
+    assert pts.shape == (2, 3)
+    np.testing.assert_allclose(pts, [[0, 0, 1], [-0.252004, 0.252004, 0.5]], atol=1e-6)
 
 
 def test_backproject_rejects_wrong_shape():

@@ -64,6 +64,15 @@ def backproject(depth_m: np.ndarray, intr: Intrinsics) -> np.ndarray:
     return np.stack([x, y, z], axis=-1)
 
 
+def backproject_pixels(uv: np.ndarray, z: np.ndarray, intr: Intrinsics) -> np.ndarray:
+    """Pixels (..., 2) as (u, v) at z-depths (...) in metres to camera-frame points (..., 3),
+    float64 metres: the inverse of ``project`` (``backproject`` does a whole image)."""
+    uv = np.asarray(uv, dtype=np.float64)
+    z = np.asarray(z, dtype=np.float64)
+    return np.stack([(uv[..., 0] - intr.cx) / intr.fx * z, (uv[..., 1] - intr.cy) / intr.fy * z,
+                     z], axis=-1)
+
+
 def project(points_cam: np.ndarray, intr: Intrinsics) -> np.ndarray:
     """Camera-frame points (..., 3) in metres to pixel coordinates (..., 2) as (u, v)."""
     p = np.asarray(points_cam, dtype=np.float64)

@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.camera.depth_input import check_depth_image
-from pipeline.camera.geometry import Intrinsics, ground_distance
+from pipeline.camera.geometry import Intrinsics, backproject_pixels, ground_distance
 from pipeline.config.build import from_section
 from pipeline.dexnet.cem import CEMConfig, CEMResult, cross_entropy_method
 from pipeline.dexnet.gqcnn import (
@@ -102,8 +102,7 @@ class Workspace:
         h, w = depth_m.shape
         u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
         z = depth_m.astype(np.float64)
-        pts = np.stack([(u - intrinsics.cx) / intrinsics.fx * z,
-                        (v - intrinsics.cy) / intrinsics.fy * z, z], axis=-1)
+        pts = backproject_pixels(np.stack([u, v], axis=-1), z, intrinsics)
         R, t = self.T_world_cam[:3, :3], self.T_world_cam[:3, 3]
         world = pts @ R.T + t
         return ((z > 0) & (np.abs(world[..., 0]) < self.half_x)

@@ -13,7 +13,6 @@ what the robot does:
 from __future__ import annotations
 
 import numpy as np
-import pybullet as p
 
 from pipeline.picking.cell import Frame, PickCell
 
@@ -49,9 +48,8 @@ def final_home_record(cell: PickCell, frame: Frame, cands: list) -> dict:
     per box in the bin (position: (3,) world frame, metres)."""
     boxes = []
     for body in cell.boxes_in_bin():
-        pos, _ = p.getBasePositionAndOrientation(body, physicsClientId=cell.client)
         boxes.append({"body": int(body), "type": str(cell.boxes[body]["type"]),
-                      "position": np.asarray(pos, np.float64)})
+                      "position": np.asarray(cell.box_pose(body)[0], np.float64)})
     uv = np.array([[float(c.u), float(c.v)] for c in cands], np.float64).reshape(-1, 2)
     return {"depth_m": np.asarray(frame.depth_m, np.float32),
             "T_world_cam": np.asarray(frame.T_world_cam, np.float64),

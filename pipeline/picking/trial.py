@@ -54,7 +54,7 @@ from typing import Optional
 import numpy as np
 import pybullet as p
 
-from pipeline.camera.geometry import Intrinsics, world_to_camera
+from pipeline.camera.geometry import Intrinsics, backproject_pixels, world_to_camera
 from pipeline.picking.cell import Frame, PickCell
 from pipeline.picking.diagnosis import final_home_record, labels_at_no_grasp
 
@@ -265,7 +265,7 @@ class PickRunner:
         z = float(frame.depth_m[v, u])
         if z <= 0:
             return None
-        return np.array([(cand.u - intr.cx) / intr.fx * z, (cand.v - intr.cy) / intr.fy * z, z])
+        return backproject_pixels(np.array([cand.u, cand.v]), z, intr)
 
     @staticmethod
     def _fixed_point(cand) -> np.ndarray | None:
