@@ -306,11 +306,10 @@ def bench_scenes(cfg, num_images: int) -> list:
 
 
 def planning_times(cfg, num_images: int = 8, repeats: int = 3) -> dict[str, float]:
-    """Median planning time per image (network + decoding + ranking, CPU, 2 threads; the
-    ``default`` network on 1 thread too).
-
-    For the ``default`` network: the trained planner of ``models/train/latest`` when it exists
-    (so the number of ranked candidates is real), otherwise an untrained one of the same width.
+    """Median planning time per image (network + decoding + ranking with the closed loop's
+    second tier, CPU, 2 threads; the ``default`` network on 1 thread too). For the ``default``
+    network: the trained planner of ``models/train/latest`` when it exists (so the number of
+    ranked candidates is real), otherwise an untrained one of the same width.
     For the ``paper`` network (width 1.0): network + decoding + ranking, untrained weights.
     """
     import torch
@@ -319,7 +318,7 @@ def planning_times(cfg, num_images: int = 8, repeats: int = 3) -> dict[str, floa
     from pipeline.cli import compose
     from pipeline.planner.data import Normalisation
     from pipeline.planner.network import GraspNet, network_config
-    from pipeline.planner.planner import Planner, ranking_config
+    from pipeline.planner.planner import Planner, fallback_threshold, ranking_config
     torch.set_num_threads(2)
     scenes = bench_scenes(cfg, num_images)
     intr = intrinsics_of(cfg)
@@ -335,14 +334,15 @@ def planning_times(cfg, num_images: int = 8, repeats: int = 3) -> dict[str, floa
             planner = Planner(net, Normalisation(rk.d_ground, 0.1, 0.5), rk)
             label = "untrained"
         # the default network also on one thread: the paper's planning-time comparison point
+        floor = fallback_threshold(full, planner.ranking.threshold)
         for threads in ((2, 1) if name == "default" else (2,)):
             torch.set_num_threads(threads)
-            planner.plan(scenes[0].depth_m, intr)  # warm-up
+            planner.plan(scenes[0].depth_m, intr, fallback_threshold=floor)  # warm-up
             times, counts = [], []
             for _ in range(1 if name == "paper" else repeats):
                 for sc in scenes[: 3 if name == "paper" else num_images]:
                     t0 = time.perf_counter()
-                    counts.append(len(planner.plan(sc.depth_m, intr)))
+                    counts.append(len(planner.plan(sc.depth_m, intr, fallback_threshold=floor)))
                     times.append(time.perf_counter() - t0)
             key = f"plan_{name}" + ("" if threads == 2 else f"_{threads}thread")
             out[f"{key}_ms"] = 1000 * float(np.median(times))

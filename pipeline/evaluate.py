@@ -112,13 +112,14 @@ def make_planner(cfg, name: str, train_dir: str | None, baseline_dir: str | None
     """``plan(depth_m, intrinsics, rng)`` for planner ``name`` (``oracle``: also ``frame=``; it
     reads the ``cell``'s true box poses, ``pipeline.picking.oracle``)."""
     if name == "dcnn":
-        from pipeline.planner.planner import Planner, ranking_config
+        from pipeline.planner.planner import Planner, fallback_threshold, ranking_config
 
         net = Planner.load(train_dir, device="cpu")
         th = cfg.evaluate.dcnn_threshold
         # the composed train.ranking (policy included), with the model's th unless overridden
         net.ranking = ranking_config(cfg, net.ranking.threshold if th is None else float(th))
-        return lambda depth, intr, rng: net.plan(depth, intr)
+        floor = fallback_threshold(cfg, net.ranking.threshold)  # the second tier's
+        return lambda depth, intr, rng: net.plan(depth, intr, fallback_threshold=floor)
     if name in DEXNET_PLANNERS:
         from pipeline.dexnet.planner import DexNetPlanner
 
@@ -179,7 +180,11 @@ def summarise(results: list[TrialResult]) -> list[dict]:
                "cleared_trials": sum(r.end == "bin_empty" for r in rs),
                "sim_s": round(sim_s, 3),
                "pph_motion": round(3600.0 * succ / sim_s, 1) if sim_s > 0 else float("nan"),
-               "wrong_target": sum(a.wrong_target for a in atts)}
+               "wrong_target": sum(a.wrong_target for a in atts),
+               # DCNN attempts on candidates of the fallback tier (evaluate.dcnn_fallback_ratio)
+               "second_tier_attempts": sum(a.second_tier for a in atts),
+               "second_tier_successes": sum(a.second_tier and a.outcome == "success"
+                                            for a in atts)}
         devs = [a.path_deviation_m for a in atts if a.path_deviation_m is not None]
         # how far the executed servo strayed from the path the run-time check predicted
         row["path_deviation_mm_median"] = round(1000 * float(np.median(devs)), 2) if devs \

@@ -15,6 +15,7 @@ from pipeline.planner import (
     EMPTY, GraspNet, NetworkConfig, conv_layers, count_flops, count_parameters, decode_output,
     decode_points, encode,
 )
+from pipeline.planner.decode import second_chance
 from pipeline.planner.network import ConvBlock
 
 R, L, B, NG = (int(c) for c in GraspClass)
@@ -180,3 +181,65 @@ def test_decode_output_positions_and_threshold():
     assert p.grasp_class == GraspClass.B and p.probability == pytest.approx(0.952574, abs=1e-6)
     assert (p.u, p.v) == pytest.approx((3.5 * 32, 2.75 * 32))  # (112, 88)
     assert len(decode_output(raw, threshold=0.0)) == 169  # sigmoid(−10) = 4.5e-5 > 0
+
+
+def fallback_raw() -> torch.Tensor:
+    """Four cells (row, col) of a 13 x 13 output, offsets 0.5 (the cell centre), every other
+    logit −10 (p = 4.5e-5):
+    (2, 3): B = sigmoid(3) = 0.952574, kept by Eq. 3 at th 0.5;
+    (5, 5): NG = sigmoid(2) = 0.880797 with L = sigmoid(0) = 0.5;
+    (8, 1): R = sigmoid(−0.5) = 0.377541, the best class but below th;
+    (10, 10): NG = 0.880797 with L = sigmoid(−2) = 0.119203."""
+    raw = torch.full((6, 13, 13), -10.0)
+    raw[:2] = 0.0
+    raw[2 + B, 2, 3] = 3.0
+    raw[2 + NG, 5, 5], raw[2 + L, 5, 5] = 2.0, 0.0
+    raw[2 + R, 8, 1] = -0.5
+    raw[2 + NG, 10, 10], raw[2 + L, 10, 10] = 2.0, -2.0
+    return raw
+
+
+def test_second_chance_by_hand():
+    preds = decode_output(fallback_raw(), threshold=0.25)
+    assert len(preds) == 4  # max class probability > 0.25 in all four cells
+    out = second_chance(preds, threshold=0.5, fallback_threshold=0.25)
+    # (2, 3) is Eq. 3's own; (10, 10)'s best class other than NG, L at 0.119, is below 0.25.
+    assert [(p.u, p.v, p.grasp_class) for p in out] == [
+        (5.5 * 32, 5.5 * 32, GraspClass.L), (1.5 * 32, 8.5 * 32, GraspClass.R)]
+    assert [p.probability for p in out] == pytest.approx([0.5, 0.377541], abs=1e-6)
+    # the cell's own probabilities are kept (NG's included)
+    assert out[0].class_probs[NG] == pytest.approx(0.880797, abs=1e-6)
+    # a floor above R's 0.3775 leaves only the NG cell's L (0.5 > 0.4)
+    assert [p.grasp_class for p in second_chance(preds, 0.5, 0.4)] == [GraspClass.L]
+
+
+def test_plan_fallback_tier_follows_eq3_candidates(monkeypatch):
+    """Level depth 0.6 m with a 0.5 m patch under the R cell: J_distance (Eq. 9, D_ground
+    0.645 m) is 1 − 0.6/0.645 = 0.0698 at the B and L cells and 1 − 0.5/0.645 = 0.2248 at R.
+    R outranks L within the second tier, but the tier follows Eq. 3's B whatever its J."""
+    from pipeline.camera.geometry import Intrinsics
+    from pipeline.planner.data import Normalisation
+    from pipeline.planner.planner import Planner
+    from pipeline.planner.ranking import RankingConfig
+
+    intr = Intrinsics(416, 416, 411.7, 411.7, 207.5, 207.5)
+    ranking = default_config(RankingConfig, d_ground=0.645, threshold=0.5)
+    planner = Planner(tiny_net(), Normalisation(0.645, 1.0, 0.0), ranking)
+    raw = fallback_raw()
+    monkeypatch.setattr(planner, "predict", lambda depth: raw[None])
+    depth = np.full((416, 416), 0.6, np.float32)
+    depth[250:295, 25:72] = 0.5  # (u, v) = (48, 272) and its normal window
+    plain = planner.plan(depth, intr)
+    assert [(c.u, c.v, c.grasp_class) for c in plain] == [(112.0, 80.0, GraspClass.B)]
+    both = planner.plan(depth, intr, fallback_threshold=0.25)
+    assert [(c.u, c.v, c.grasp_class) for c in both] == [
+        (112.0, 80.0, GraspClass.B), (48.0, 272.0, GraspClass.R), (176.0, 176.0, GraspClass.L)]
+    assert [c.score for c in both] == pytest.approx([1 - 0.6 / 0.645, 1 - 0.5 / 0.645,
+                                                     1 - 0.6 / 0.645], abs=1e-6)
+    same = planner.plan(depth, intr, fallback_threshold=0.5)  # not below th: off
+    assert [(c.u, c.v, c.grasp_class) for c in same] == [(112.0, 80.0, GraspClass.B)]
+    # Only second-tier cells: Eq. 3 alone proposes nothing, the tier does.
+    raw[2 + B, 2, 3] = -10.0
+    assert planner.plan(depth, intr) == [] and planner.last_reason == "no_prediction"
+    assert [c.grasp_class for c in planner.plan(depth, intr, fallback_threshold=0.25)] == [
+        GraspClass.R, GraspClass.L] and planner.last_reason == ""

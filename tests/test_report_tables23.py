@@ -45,7 +45,14 @@ def test_table3_rows_and_failures():
     dev = path_deviation_table(info).markdown()
     assert "| 8 | 2.5 | — |" in dev  # a missing deviation (no prediction) shows as —
     f = failures_table(info).csv_text().splitlines()
-    assert f[1] == "dcnn,0,0,2,0,0,0,1,1,0,0,0"
+    assert f[1] == "dcnn,0,0,2,0,0,0,1,1,0,0,0,,"  # no fallback-tier counts: an older artifact
+    row.update(second_tier_attempts=3, second_tier_successes=2)
+    oracle = dict(row, planner="oracle")  # the oracle has no fallback tier, whatever it records
+    info.manifest["metrics"]["table3"] = [row, oracle]
+    f = failures_table(info).csv_text().splitlines()
+    assert f[1:] == ["dcnn,0,0,2,0,0,0,1,1,0,0,0,3,2", "oracle,0,0,2,0,0,0,1,1,0,0,0,,"]
+    assert "| dcnn | 0 | 0 | 2 | 0 | 0 | 0 | 1 | 1 | 0 | 0 | 0 | 3 | 2 |" in \
+        failures_table(info).markdown()
 
 
 def test_no_grasp_table_sums_the_no_grasp_endings(tmp_path):

@@ -457,6 +457,7 @@ class EvaluateConfig:
     dexnet_variant: str = MISSING  # gqcnn | gqcnn_ood | planarity (a baseline variant)
     dexnet_pattern: str = MISSING  # the cup that serves Dex-Net's single suction point
     dcnn_threshold: Optional[float] = MISSING  # th of Eq. 3 for the closed loop; None: the model's
+    dcnn_fallback_ratio: Optional[float] = MISSING  # second tier above this times th; None: off
     stop_on_box_contact: bool = MISSING  # True: touching any box but the target fails the attempt
     check_reachability: bool = MISSING  # run-time robot-level check of the planned grasp
     max_candidates_checked: int = MISSING

@@ -89,6 +89,7 @@ class Attempt:
     pregrasp_standoff: float = 0.0  # m, the pre-grasp's distance along the normal (0: none)
     lost_reason: str = ""  # the descriptor's reason when the target was lost
     face_split: bool = False  # the servo's region was split at other planner points (face_split_m)
+    second_tier: bool = False  # a DCNN candidate of the fallback tier (dcnn_fallback_ratio)
     # m: farthest the executed camera came from the servo path the run-time check predicted
     # (robot.path_check; None without a prediction)
     path_deviation_m: Optional[float] = None
@@ -558,7 +559,8 @@ class PickRunner:
         att = Attempt(trial=trial, index=index, planner=self.name, pattern=pattern,
                       g_opt=[float(cand.u), float(cand.v)], target_body=target,
                       target_type=cell.boxes[target]["type"] if target >= 0 else "",
-                      planning_s=planning_s, face_split=sites_world is not None)
+                      planning_s=planning_s, face_split=sites_world is not None,
+                      second_tier=bool(getattr(cand, "second_tier", False)))
         # Dex-Net: the servo target is its own point, fixed in the world.
         fixed_point_world = None
         fixed = self._fixed_point(cand)

@@ -43,3 +43,26 @@ def decode_output(raw: torch.Tensor, threshold: float = 0.0,
             grasp_class=GraspClass(int(best[jv, ju])), probability=float(best_p[jv, ju]),
             class_probs=probs[jv, ju].copy()))
     return out
+
+
+def second_chance(preds: list[GraspPrediction], threshold: float,
+                  fallback_threshold: float) -> list[GraspPrediction]:
+    """The cells that Eq. 3 at ``threshold`` drops (their most probable class is NG, or its
+    probability is at most ``threshold``) but whose most probable class other than NG has a
+    probability above ``fallback_threshold``, each as that class with that probability.
+
+    ``preds``: ``decode_output`` at ``fallback_threshold`` or lower (each cell's
+    ``class_probs`` are read; a cell below ``fallback_threshold`` in every class gives
+    nothing). The closed loop's fallback tier (``Planner.plan``), not the paper."""
+    out = []
+    for p in preds:
+        if p.grasp_class != GraspClass.NG and p.probability > threshold:
+            continue  # Eq. 3 keeps it
+        probs = np.asarray(p.class_probs, np.float64).copy()
+        probs[int(GraspClass.NG)] = -np.inf
+        best = int(probs.argmax())
+        if probs[best] > fallback_threshold:
+            out.append(GraspPrediction(u=p.u, v=p.v, grasp_class=GraspClass(best),
+                                       probability=float(probs[best]),
+                                       class_probs=p.class_probs))
+    return out

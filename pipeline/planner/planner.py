@@ -37,7 +37,7 @@ from pipeline.camera.geometry import Intrinsics, ground_distance
 from pipeline.config.build import from_section
 from pipeline.labelling.types import GraspClass
 from pipeline.planner.data import Normalisation, normalise_depth
-from pipeline.planner.decode import decode_output
+from pipeline.planner.decode import decode_output, second_chance
 from pipeline.planner.network import GraspNet, NetworkConfig
 from pipeline.planner.ranking import GraspCandidate, RankingConfig, rank_grasps
 
@@ -183,8 +183,16 @@ class Planner:
         x = torch.from_numpy(normalise_depth(batch, self.norm)).to(self.device)
         return self.net(x).float().cpu()
 
-    def plan(self, depth_m: np.ndarray, intrinsics: Intrinsics) -> list[GraspCandidate]:
+    def plan(self, depth_m: np.ndarray, intrinsics: Intrinsics,
+             fallback_threshold: float | None = None) -> list[GraspCandidate]:
         """One (H, W) depth image, metres → candidates sorted by J (Eq. 7), G_opt first.
+
+        ``fallback_threshold`` (not the paper; ``evaluate.dcnn_fallback_ratio`` in the closed
+        loop): when given and below th, the candidates of Eq. 3 are followed by a second tier, sorted
+        by J among themselves: the cells Eq. 3 drops whose most probable class other than NG
+        has a probability above it (``decode.second_chance``), as that class. A caller that
+        executes the first candidate a check accepts thus reaches the second tier only when
+        no candidate of Eq. 3 passes. None (default): Eq. 3 alone, as in Tables 1 and 2.
 
         NaN, ±inf, ≤ 0 and implausible depths are no data (``check_depth_image``); a wrong
         shape (also one that differs from ``intrinsics``), ndim or a non-float dtype raises a
@@ -205,14 +213,23 @@ class Planner:
             self.last_reason = NO_VALID_DEPTH
             return []
         raw = self.predict(depth_m)[0]
-        preds = decode_output(raw, threshold=self.ranking.threshold, image_size=self.size)
+        th = self.ranking.threshold
+        second = fallback_threshold is not None and float(fallback_threshold) < th
+        floor = float(fallback_threshold) if second else th
+        preds = decode_output(raw, threshold=floor, image_size=self.size)
         # A (pathological) non-finite offset has no pixel: drop it before rounding.
         preds = [p for p in preds if np.isfinite(p.u) and np.isfinite(p.v)]
-        if not any(p.probability > self.ranking.threshold and p.grasp_class != GraspClass.NG
-                   for p in preds):
+        first = [p for p in preds if p.probability > th and p.grasp_class != GraspClass.NG]
+        tiers = [(first, self.ranking)]
+        if second:
+            tiers.append((second_chance(preds, th, floor),
+                          dataclasses.replace(self.ranking, threshold=floor)))
+        if not any(preds for preds, _ in tiers):
             self.last_reason = NO_PREDICTION
             return []
-        ranked = [c for c in rank_grasps(preds, depth_m, intrinsics, self.ranking)
+        ranked = [dataclasses.replace(c, second_tier=tier > 0)
+                  for tier, (preds, ranking) in enumerate(tiers)
+                  for c in rank_grasps(preds, depth_m, intrinsics, ranking)
                   if _has_data(depth_m, c.u, c.v)]
         if not ranked:
             self.last_reason = NO_RANKABLE_CANDIDATE
@@ -235,6 +252,13 @@ def ranking_config(cfg, threshold: float) -> RankingConfig:
                         threshold=float(threshold),
                         phi_switch=math.radians(float(r.phi_switch_deg)),
                         inclination_tie=math.radians(float(r.inclination_tie_deg)))
+
+
+def fallback_threshold(cfg, threshold: float) -> float | None:
+    """The floor of ``Planner.plan``'s second tier in the closed loop:
+    ``evaluate.dcnn_fallback_ratio`` × th (``threshold``); None when the ratio is null (off)."""
+    ratio = cfg.evaluate.dcnn_fallback_ratio
+    return None if ratio is None else float(ratio) * float(threshold)
 
 
 def ranking_dict(r: RankingConfig) -> dict:

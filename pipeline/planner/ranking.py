@@ -67,7 +67,8 @@ POLICIES = ("paper", "height_tiebreak")
 class GraspCandidate:
     """A scored grasp point. ``u``, ``v``: pixels; ``score``: J of Eq. 7; ``phi``: rad;
     ``depth``: I(g), metres; ``normal_cam``: (3,) unit normal, camera frame, towards the camera;
-    ``j_distance``, ``j_inclination``: Eqs. 9 and 10 (both shown in the paper's Fig. 9)."""
+    ``j_distance``, ``j_inclination``: Eqs. 9 and 10 (both shown in the paper's Fig. 9);
+    ``second_tier``: proposed by the fallback tier of ``Planner.plan``, not by Eq. 3."""
 
     u: float
     v: float
@@ -79,6 +80,7 @@ class GraspCandidate:
     normal_cam: np.ndarray
     j_distance: float
     j_inclination: float
+    second_tier: bool = False  # the closed loop's fallback tier (``Planner.plan``), not Eq. 3's
 
 
 def surface_normal(points_cam: np.ndarray, u: int, v: int, half_window: int,

@@ -79,13 +79,22 @@ def table3_table(info: EvaluateInfo) -> Table:
 
 
 def failures_table(info: EvaluateInfo) -> Table:
-    """Failed attempts by kind, successes on another box and how the trials ended, per planner."""
+    """Failed attempts by kind, successes on another box, how the trials ended, and the DCNN's
+    attempts on candidates of its fallback tier and their successes (``evaluate.
+    dcnn_fallback_ratio``; — for the other planners and for artifacts that predate it), per
+    planner."""
     from pipeline.picking.trial import OUTCOMES, TRIAL_ENDS
 
     kinds = OUTCOMES[1:]
-    headers = ["planner", *kinds, "success on another box", *(f"trials ended: {e}" for e in TRIAL_ENDS)]
+    headers = ["planner", *kinds, "success on another box", *(f"trials ended: {e}" for e in TRIAL_ENDS),
+               "second-tier attempts", "second-tier successes"]
+
+    def tier(r: dict, key: str):
+        return int(r[key]) if r["planner"] == "dcnn" and key in r else None
+
     rows = [[r["planner"], *(int(r[f"fail_{k}"]) for k in kinds), int(r["wrong_target"]),
-             *(int(r[f"end_{e}"]) for e in TRIAL_ENDS)] for r in info.metrics["table3"]]
+             *(int(r[f"end_{e}"]) for e in TRIAL_ENDS), tier(r, "second_tier_attempts"),
+             tier(r, "second_tier_successes")] for r in info.metrics["table3"]]
     return Table("table3_failures", headers, rows)
 
 
