@@ -201,6 +201,23 @@ def test_seed_on_depth_spike():
     np.testing.assert_allclose(f.normal_cam, [0, 0, -1], atol=1e-6)
 
 
+def test_a_seed_in_a_sensor_hole_keeps_the_face_around_it():
+    # An 11 x 11 hole (no data, as an SR300 leaves) centred on the seed in A's face: with
+    # seed_repair the seed takes the depth of the nearest window pixel with data (5 px away, on
+    # A), the window plane is A's, the seed pixel has no data and so fails the rules, and the
+    # region is the component of the nearest rule pixel: all of A but the hole's 121 pixels
+    # (their neighbours' n_p lack a stencil pixel; they are on A's plane and come back through
+    # the rim), with A's normal.
+    depth, hits = render([BOX_A, BOX_B_STEP])
+    depth[195:206, 155:166] = 0.0
+    f, reason = describe_surface(depth, SR300, (160, 200), descriptor())
+    assert reason == "" and f.num_pixels == A_PIXELS - 121
+    hole = np.zeros_like(hits[0])
+    hole[195:206, 155:166] = True
+    np.testing.assert_array_equal(f.region, hits[0] & ~hole)
+    np.testing.assert_allclose(f.normal_cam, [0, 0, -1], atol=1e-6)
+
+
 def test_region_stops_at_crease_between_level_and_tilted_box():
     # B touches A along x = 0 at the same height and goes down at 20°: points
     # (t cos 20°, y, 0.5 + t sin 20°), t ∈ [0, 0.10]; normal towards the camera (sin 20°, 0, −cos 20°).
@@ -228,7 +245,10 @@ def test_failures_have_reasons():
     depth, _ = render([BOX_A, BOX_B_STEP])
     assert describe_surface(depth, SR300, (500, 10), descriptor()) == (None, "seed_outside_image")
     holed = depth.copy()
-    holed[195:206, 155:166] = 0.0
+    holed[195:206, 155:166] = 0.0  # an 11 x 11 hole around the seed
+    assert describe_surface(holed, SR300, (160, 200), descriptor(seed_repair=False)) == (
+        None, "no_depth_at_seed")
+    holed[185:216, 145:176] = 0.0  # a hole larger than the 21 x 21 window: nothing to repair
     assert describe_surface(holed, SR300, (160, 200), descriptor()) == (None, "no_depth_at_seed")
     # Region of 6724 pixels < min_pixels.
     assert describe_surface(depth, SR300, (160, 200), descriptor(min_pixels=7000)) == (

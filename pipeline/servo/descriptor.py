@@ -148,10 +148,12 @@ class DescriptorConfig:
             fixed pixel size shrinks on the surface as the camera approaches: at 0.16 m a
             21 × 21 window spans 8 mm, and a plane steeper than the face can then hold most of
             its points within ε1 = 4 mm.
-        seed_repair: the plane through the 3 × 3 median depth when the seed pixel is more than
-            ε1 from it (a crack), and the nearest component of at least ``min_pixels`` when the
-            seed's own is smaller (False: the seed's depth and component as they are, the
-            nearest rule pixel only when the seed fails the rules).
+        seed_repair: a seed pixel without data takes the depth of the nearest window pixel
+            with data (a sensor's hole; False: "no_depth_at_seed"), the plane through the
+            3 × 3 median depth when the seed pixel is more than ε1 from it (a crack), and the
+            nearest component of at least ``min_pixels`` when the seed's own is smaller
+            (False: the seed's depth and component as they are, the nearest rule pixel only
+            when the seed fails the rules).
         track_normal_deg: with an expected normal (``describe_surface(expected_normal_cam=)``,
             the tracked surface's normal carried from the previous frame), the window plane
             takes that orientation (``_tracked_plane``), and a surface found farther than this
@@ -380,7 +382,8 @@ def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
     Returns:
         (features, "") when a surface is found, else (None, reason) with reason one of
         ``NO_SURFACE_REASONS``: ``"seed_outside_image"`` (also a NaN/inf seed),
-        ``"no_depth_at_seed"`` (also an image with no data at all), ``"too_few_window_points"``,
+        ``"no_depth_at_seed"`` (with ``seed_repair``: no data in the whole window),
+        ``"too_few_window_points"``,
         ``"no_region_at_seed"``, ``"region_too_small"``, ``"edge_on"`` (a region pixel's ray
         misses the plane), ``"surface_changed"`` (its normal is more than
         ``cfg.track_normal_deg`` from ``expected_normal_cam``).
@@ -414,7 +417,7 @@ def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
     # Back-projection P = Z (xn, yn, 1), as camera.backproject; X = Z xn and Y = Z yn are only
     # formed where needed (the window, the crop).
     valid = Z > 0
-    if not valid[v, u]:
+    if not valid[v, u] and not cfg.seed_repair:
         return None, "no_depth_at_seed"
     xn = ((np.arange(W, dtype=np.float32) - np.float32(intrinsics.cx))
           / np.float32(intrinsics.fx))
@@ -425,6 +428,8 @@ def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
     h = cfg.window // 2
     v0, v1, u0, u1 = max(v - h, 0), min(v + h + 1, H), max(u - h, 0), min(u + h + 1, W)
     wv, wu = np.nonzero(valid[v0:v1, u0:u1])
+    if not valid[v, u] and len(wv) == 0:
+        return None, "no_depth_at_seed"
     if len(wv) < MIN_WINDOW_POINTS:
         return None, "too_few_window_points"
     wv, wu = wv + v0, wu + u0
@@ -433,9 +438,15 @@ def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
     # The seed's depth: the median of its 3 × 3 neighbourhood when the seed pixel is more than
     # ε1 from it (a one-pixel crack between two boxes, or a spike): the window plane must be the
     # surface around the seed, not the crack's.
+    # A seed pixel without data (a sensor's hole) takes the depth of the nearest window pixel
+    # that has one, with seed_repair; the region then grows from the nearest rule pixel (below).
     z_seed = float(Z[v, u])
+    if z_seed <= 0:
+        k = int(np.argmin((wv - v) ** 2 + (wu - u) ** 2))  # the first of equally near ones
+        z_seed = float(Z[wv[k], wu[k]])
     around = Z[max(v - 1, 0):v + 2, max(u - 1, 0):u + 2]
-    z_around = float(np.median(around[around > 0]))
+    around = around[around > 0]
+    z_around = float(np.median(around)) if around.size else z_seed
     if cfg.seed_repair and abs(z_seed - z_around) > cfg.eps_distance:
         z_seed = z_around
     seed_point = z_seed * np.array([xn[u], yn[v], 1.0], dtype=np.float64)
