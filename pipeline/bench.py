@@ -3,25 +3,23 @@
 Rendering (``--only render``): ms per frame of the ray-cast renderer and of TinyRenderer on the
 same frames in one run, the rest check (heaps of 20 boxes that move in one more second, settle
 steps), generation scenes/s and the closed loop with each renderer. Generation throughput with 1
-and 2 worker processes and the ratio of the stage's per-process rate to a bare pybullet loop
-doing the same work (same cell, same trickle drop and rest test, same renderer) measured in the
-same run. Labelling
-throughput with 1 and 2 workers on the generated scenes, and its split between surface
-detection and robot checks. Planning time per image of the DCNN (default and paper widths)
-and of the Dex-Net-style planner (GQ-CNN and planarity), GQ-CNN training throughput. The
-closed loop: the surface descriptor's time per frame, the control loop's rate, simulated
-seconds per wall second and the wall time of a 3-box trial. The executors (``executor=local|ray``,
-``--only executors``): overhead per trivial task, Ray's start-up, and generation + labelling
-throughput with 1 and 2 workers under each. Training memory (``--only training``): peak
-resident memory of loading an experiment's splits, reading one epoch of batches from disk and a
-few training steps of its network, against what the depth would take held in memory. The
-sensor model and depth preprocessing (``--only sensor``): time per image of the SR300 model,
-hole filling and the median, and what they do to the depth of the bench's heaps (pixels
-without data, error against the ideal depth).
+and 2 worker processes and the ratio of the stage's per-process rate to a bare pybullet loop doing
+the same work (same cell, same trickle drop and rest test, same renderer) measured in the same run.
+Labelling throughput with 1 and 2 workers on the generated scenes, and its split between surface
+detection and robot checks. Planning time per image of the DCNN (default and paper widths) and of
+the Dex-Net-style planner (GQ-CNN and planarity), GQ-CNN training throughput. The closed loop: the
+surface descriptor's time per frame, the control loop's rate, simulated seconds per wall second and
+the wall time of a 3-box trial. The executors (``executor=local|ray``, ``--only executors``):
+overhead per trivial task, Ray's start-up, and generation + labelling throughput with 1 and 2
+workers under each. Training memory (``--only training``): peak resident memory of loading an
+experiment's splits, reading one epoch of batches from disk and a few training steps of its
+network, against what the depth would take held in memory. The sensor model and depth preprocessing
+(``--only sensor``): time per image of the SR300 model, hole filling and the median, and what they
+do to the depth of the bench's heaps (pixels without data, error against the ideal depth). The DCNN
+on a CUDA GPU (``--only gpu``, ``pipeline/bench_gpu.py``): planning time, training images/s and
+agreement with the CPU.
 
-    python -m pipeline.bench [--scenes 60]
-                             [--only stages|render|planners|closed-loop|executors|training|sensor|ood]
-                             [--experiment paper] [--root <paths.root>]
+    python -m pipeline.bench [--scenes 60] [--only GROUP] [--experiment paper] [--root <root>]
 """
 
 from __future__ import annotations
@@ -707,7 +705,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", type=int, default=60, help="scenes per throughput run")
     parser.add_argument("--only", choices=("all", "stages", "render", "planners", "closed-loop",
-                                           "executors", "training", "sensor", "ood"),
+                                           "executors", "training", "sensor", "ood", "gpu"),
                         default="all", help="run one group of figures")
     parser.add_argument("--experiment", default="paper",
                         help="--only training: whose latest label artifact to load (paper)")
@@ -733,9 +731,10 @@ def main(argv: list[str] | None = None) -> int:
               f"{mem['train_images_per_s']:.2f} images/s)")
         print(json.dumps({k: round(v, 3) if isinstance(v, float) else v for k, v in mem.items()}))
         return 0
-    if args.only == "ood":  # the Dex-Net-style baseline's out-of-domain heaps (bench_ood.py)
-        from pipeline.bench_ood import main as ood_main
-        return ood_main(["--scenes", str(min(args.scenes, 8))])
+    if args.only in ("ood", "gpu"):  # the baseline's out-of-domain heaps; the DCNN on CUDA
+        from pipeline import bench_gpu, bench_ood
+        return (bench_ood.main(["--scenes", str(min(args.scenes, 8))]) if args.only == "ood"
+                else bench_gpu.main([]))
     if args.only in ("render", "executors"):
         results.update(render_group(cfg, args.scenes) if args.only == "render"
                        else executor_figures(args.scenes))

@@ -80,6 +80,7 @@ from pipeline.planner.data import GraspDataset, epoch_batches, make_loader, norm
 from pipeline.planner.evaluate import downsample_curve
 from pipeline.planner.loss import LossConfig, grasp_loss, loss_config
 from pipeline.planner.network import GraspNet, count_flops, count_parameters, network_config
+from pipeline.planner.numerics import set_training_numerics
 from pipeline.planner.planner import MODEL_FILE, Planner, pick_device, ranking_config
 from pipeline.planner.scoring import EVAL_BATCH, ranked_images, table1
 from pipeline.tracking import StageLog
@@ -296,9 +297,7 @@ def train(cfg: DictConfig) -> Path | None:
 
     def setup():
         """Deterministic torch state, the network and Adam: the same on every rank."""
-        if device.type == "cuda":
-            os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
-        torch.use_deterministic_algorithms(True, warn_only=device.type == "cuda")
+        set_training_numerics(device.type)
         torch.set_num_threads(max(1, int(tc.num_threads) // ctx.local_world_size))
         torch.manual_seed(seed)
         net = GraspNet(net_cfg).to(run_device, memory_format=memory_format)
