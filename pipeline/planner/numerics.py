@@ -18,10 +18,11 @@ def set_training_numerics(device_type: str) -> None:
     """Deterministic algorithms and full-float32 convolutions and matrix products.
 
     PyTorch runs CUDA convolutions in TF32 by default (10-bit mantissa). For the DCNN that puts
-    a first step's gradient 16 % (width 0.125) to 26 % (width 1.0) away from a float64
-    reference, against 1 % in float32 on the CPU or on CUDA (``make bench ARGS="--only gpu"``);
-    the training stage keeps float32 so that a GPU trains with the CPU's arithmetic.
-    On CUDA a kernel without a deterministic implementation warns instead of failing.
+    a training step's gradient about ten times further from a float64 reference than float32
+    does, on the CPU or on CUDA (``make bench ARGS="--only gpu"`` measures both, and the speed
+    TF32 would gain); the training stage keeps float32 so that a GPU trains with the CPU's
+    arithmetic. On CUDA a kernel without a deterministic implementation warns instead of
+    failing.
 
     Args:
         device_type: ``"cpu"`` or ``"cuda"`` (``torch.device.type``).
