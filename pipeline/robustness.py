@@ -180,14 +180,14 @@ def table1_rows(p: Pipelines, inputs: list[str], radius_px: float, max_images: i
 def table2_rows(p: Pipelines, inputs: list[str], max_images: int, progress: bool
                 ) -> tuple[list[dict], dict]:
     """Table 2 of both networks and the Dex-Net-style planners on each input."""
-    from pipeline import baseline as bl
     from pipeline.dataset.scenes import SceneDataset
+    from pipeline.dexnet import table2
     from pipeline.planner.planner import Planner
 
     cfg = compose("baseline", p.base + [f"baseline.max_eval_images={max_images}"])
     gen_dir = p.dirs["generate_noisy"]
     gen = SceneDataset(gen_dir, "test")
-    planners = bl.make_planners(cfg, gen, p.dirs["baseline"], None)
+    planners = table2.make_planners(cfg, gen, p.dirs["baseline"], None)
     nets = {m: Planner.load(p.dirs[f"train_{m}"]) for m in ("clean", "noisy")}
     ours = {f"dcnn_{m}": (lambda depth, intr, i, net=net: net.plan(depth, intr))
             for m, net in nets.items()}
@@ -195,10 +195,10 @@ def table2_rows(p: Pipelines, inputs: list[str], max_images: int, progress: bool
     radius = float(cfg.baseline.table2_radius_px)
     rows, picks = [], {}
     for name in inputs:
-        res = bl.evaluate_table2(cfg, gen_dir, p.dirs["baseline"], None, progress,
-                                 planners=planners, depth_of=depth_getter(name))
+        res = table2.evaluate_table2(cfg, gen_dir, p.dirs["baseline"], None, progress,
+                                     planners=planners, depth_of=depth_getter(name))
         picks[name] = {k: res[f"{k}_uv"] for k in res["planners"]}
-        for r in bl.table2_rows(res, radius, np.array([radius]))[0]:
+        for r in table2.table2_rows(res, radius, np.array([radius]))[0]:
             rows.append({"planner": r["planner"], "input": name,
                          **{k: v for k, v in r.items() if k not in ("planner", "name")}})
     return rows, picks

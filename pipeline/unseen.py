@@ -104,7 +104,7 @@ def table1_row(name: str, res: dict) -> dict:
 def unseen_tables(cfg, dirs: dict[str, Path], progress: bool) -> tuple[list, list, dict]:
     """Table 1 and Table 2 rows (seen from the manifests, unseen measured here) and each
     planner's G_opt on the unseen test images."""
-    from pipeline import baseline as bl
+    from pipeline.dexnet.table2 import evaluate_table2, table2_rows
     from pipeline.dataset.labels import LabelSet
     from pipeline.planner.data import GraspDataset
     from pipeline.planner.planner import Planner
@@ -121,11 +121,11 @@ def unseen_tables(cfg, dirs: dict[str, Path], progress: bool) -> tuple[list, lis
 
     bcfg = compose("baseline", base)
     radius = float(bcfg.baseline.table2_radius_px)
-    res = bl.evaluate_table2(bcfg, dirs["generate_unseen"], dirs["baseline"], dirs["train"],
-                             progress)
+    res = evaluate_table2(bcfg, dirs["generate_unseen"], dirs["baseline"], dirs["train"],
+                          progress)
     seen_rows = load_manifest(dirs["baseline"])["metrics"]["table2"]["rows"]
     t2 = [{"set": "seen", **r} for r in seen_rows]
-    t2 += [{"set": "unseen", **r} for r in bl.table2_rows(res, radius, np.array([radius]))[0]]
+    t2 += [{"set": "unseen", **r} for r in table2_rows(res, radius, np.array([radius]))[0]]
     picks = {k: res[f"{k}_uv"] for k in res["planners"]}
     return t1, t2, picks
 

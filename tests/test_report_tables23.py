@@ -99,7 +99,7 @@ def test_ablation_table_by_hand():
 
 
 def test_table2_shows_each_gqcnn_with_what_it_was_trained_on():
-    from pipeline.baseline import PLANNER_NAMES
+    from pipeline.dexnet.table2 import PLANNER_NAMES
     from pipeline.report.baseline import render_baseline
 
     rows = [{"planner": k, "name": PLANNER_NAMES[k], "images": 4, "no_grasp": 0,

@@ -16,6 +16,20 @@ def test_imports_inside_functions_count():
     assert "pipeline.labelling.robot_check" in import_closure("pipeline.label")
 
 
+STAGES = ("generate", "label", "train", "baseline", "evaluate", "unseen", "ablation",
+          "robustness")
+
+
+def test_no_stage_module_is_a_library():
+    """A stage's version depends on the code it runs: no stage imports another stage's module,
+    except the ablation, which runs the evaluate stage itself once per variant."""
+    runs_as_stage = {("ablation", "evaluate")}
+    for stage in STAGES:
+        imported = {m.split(".")[1] for m in import_closure(f"pipeline.{stage}")
+                    if m.count(".") == 1} & set(STAGES) - {stage}
+        assert {(stage, other) for other in imported} <= runs_as_stage, (stage, imported)
+
+
 def test_stage_hashes_differ_and_are_stable():
     hashes = {s: source_hash(s) for s in ("generate", "label", "train", "baseline", "report")}
     assert len(set(hashes.values())) == len(hashes)
