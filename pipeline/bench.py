@@ -449,20 +449,18 @@ def training_images_per_s(cfg, width: float, batch: int = 16, steps: int = 4,
     channels-last memory layout (``train.channels_last``); ``cfg``'s network at ``width``."""
     import torch
 
+    from pipeline.bench_gpu import random_training_batch
     from pipeline.planner.loss import grasp_loss, loss_config
     from pipeline.planner.network import GraspNet, network_config
-    from pipeline.planner.targets import encode, stack_targets
 
     torch.set_num_threads(2)
     torch.manual_seed(0)
-    rng = np.random.default_rng(0)
     layout = torch.channels_last if channels_last else torch.contiguous_format
     net_cfg = dataclasses.replace(network_config(cfg), width=width)
     net = GraspNet(net_cfg).train().to(memory_format=layout)
     opt = torch.optim.Adam(net.parameters(), lr=1e-4)
-    x = torch.randn(batch, 1, 416, 416).to(memory_format=layout)
-    targets = stack_targets([encode(rng.uniform(0, 415, (10, 2)), rng.integers(0, 4, 10))
-                             for _ in range(batch)])
+    x, targets = random_training_batch(batch, net_cfg.input_size, net_cfg.grid)
+    x = x.to(memory_format=layout)
     times = []
     for _ in range(steps + 1):  # the first step warms up
         t0 = time.perf_counter()

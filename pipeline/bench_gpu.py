@@ -47,8 +47,10 @@ from pipeline.planner.targets import encode, stack_targets
 MODES = ("stage", "tf32", "autotuned")
 
 
-def _batch(batch: int, size: int, grid: int, seed: int = 0):
-    """Random depth-like inputs (B, 1, S, S) and targets with 10 grasp points per image."""
+def random_training_batch(batch: int, size: int, grid: int, seed: int = 0):
+    """Random depth-like inputs (B, 1, S, S), standard normal, and the targets of 10 random
+    grasp points of random classes per image (``targets.stack_targets``): what the training
+    benchmarks (this module's and ``bench.training_images_per_s``) train on."""
     rng = np.random.default_rng(seed)
     x = torch.from_numpy(rng.normal(0.0, 1.0, (batch, 1, size, size)).astype(np.float32))
     targets = stack_targets([encode(rng.uniform(0, size - 1, (10, 2)), rng.integers(0, 4, 10),
@@ -84,7 +86,7 @@ def planning_ms(net_cfg, mode: str, repeats: int = 50) -> float:
     _settings(mode)
     torch.manual_seed(0)
     net = GraspNet(net_cfg).cuda().eval()
-    x, _ = _batch(1, net_cfg.input_size, net_cfg.grid)
+    x, _ = random_training_batch(1, net_cfg.input_size, net_cfg.grid)
 
     def plan():
         with torch.inference_mode():
@@ -112,7 +114,7 @@ def _train_steps(net_cfg, loss_cfg, x, targets, steps: int, lr: float, seed: int
 def training_figures(cfg, width: float, steps: int) -> dict[str, float]:
     net_cfg = dataclasses.replace(network_config(cfg), width=width)
     loss_cfg, batch, lr = loss_config(cfg), int(cfg.train.batch_size), float(cfg.train.lr)
-    x, targets = _batch(batch, net_cfg.input_size, net_cfg.grid)
+    x, targets = random_training_batch(batch, net_cfg.input_size, net_cfg.grid)
     out = {}
     for mode in MODES:
         _settings(mode)
@@ -126,11 +128,13 @@ def training_figures(cfg, width: float, steps: int) -> dict[str, float]:
 
 def agreement(cfg, width: float, steps: int) -> dict[str, float]:
     """The first step's loss and gradients on the CPU (float32) and on CUDA (stage settings,
-    and PyTorch's default TF32 convolutions) against a float64 CPU reference with the same weights and batch; and
-    CUDA against itself after ``steps`` steps with the stage's settings."""
+    and PyTorch's default TF32 convolutions) against a float64 CPU reference with the same
+    weights and batch; and CUDA against itself after ``steps`` steps with the stage's
+    settings."""
     net_cfg = dataclasses.replace(network_config(cfg), width=width)
     loss_cfg, lr = loss_config(cfg), float(cfg.train.lr)
-    x, targets = _batch(int(cfg.train.batch_size), net_cfg.input_size, net_cfg.grid)
+    x, targets = random_training_batch(int(cfg.train.batch_size), net_cfg.input_size,
+                                       net_cfg.grid)
     torch.manual_seed(0)
     weights = GraspNet(net_cfg).state_dict()
 
