@@ -8,7 +8,9 @@ For every generated depth image:
    surface gives a grasp point g = its centre in pixels, a normal, long/short axes and lengths.
 2. **Hand level** (Figs. 5, 6): B, L, R or NG from the surface alone
    (``pipeline.labelling.hand``); also NG ("center_occluded") when the centre of the visible
-   region falls on another box lying across the face (about 4 % of surfaces).
+   region falls on another box lying across the face (about 4 % of surfaces), and NG ("hold")
+   when the pattern's cups would not hold the box's weight (``hand.hold_check``, an extension
+   of the paper's rule: ``pipeline.labelling.scene``).
 3. **Robot level** (Fig. 4e): for B, L and R, the robot (``pipeline.robot``) must reach the
    target camera pose (inverse kinematics checked by forward kinematics), within joint limits,
    without the arm or hand touching the bin or other boxes; otherwise NG with the failed check.
@@ -57,7 +59,8 @@ from pipeline.labelling.types import CLASS_COLORS, NG_REASONS, GraspClass
 from pipeline.tracking import StageLog, default_blueprint
 
 STAGE = "label"
-SECTIONS = ("hand", "surfaces", "label", "robot", "motion", "servo")
+# boxes, physics, suction: the hold check (hand.hold_check) weighs the boxes against the cups
+SECTIONS = ("hand", "surfaces", "label", "robot", "motion", "servo", "boxes", "physics", "suction")
 NOT_AFFECTING_RESULT = ("label.workers", "label.force", "label.generate_version")
 
 @dataclass(frozen=True)
@@ -101,7 +104,8 @@ def label_shard(task: LabelTask) -> LabelSummary:
     per_scene = []
     for index in range(task.first, task.first + task.count):
         scene = ds[index]
-        rows, match, ts, tr = label_scene(scene, cfg, _STATE.get("robot"), ds.bin)
+        rows, match, ts, tr = label_scene(scene, cfg, _STATE.get("robot"), ds.bin,
+                                          density=float(cfg.boxes.density))
         summary.surface_s += ts
         summary.robot_s += tr
         summary.matches.append(match)

@@ -105,3 +105,48 @@ def test_target_axes_right_handed():
     assert R[:, 2] == pytest.approx([0, 0.5, np.sqrt(3) / 2])
     assert R[:, 1] == pytest.approx([0, np.sqrt(3) / 2, -0.5])
     assert np.linalg.det(R) == pytest.approx(1.0)
+
+
+# --- Hold check (hand.hold_check): the labels' pattern must hold the box's weight -------------
+# A medium box (0.145 × 0.092 × 0.052 m, 400 kg/m³: m = 0.27747 kg, m g = 2.7220 N at
+# g = 9.81) shows its 0.092 × 0.052 m end face, the face normal tilted by t from the camera's
+# -z about the camera's x. The camera looks straight down (T_world_cam: x, -y, -z), so gravity
+# in the camera frame is (0, 0, +g). One cup (L) on the face centre c; the centre of mass lies
+# 0.145 / 2 = 0.0725 m behind it, along -n. With n = (0, sin t, -cos t):
+#   pull f = m g cos t, f_N = V - f = 12.7 - 2.722 cos t (N);
+#   tau = (com - c) × F = -0.0725 n × (0, 0, m g) = -0.0725 m g (sin t, 0, 0): no torsion
+#   (tau . a = 0), bending |tau| / r = 0.0725 × 2.722 sin t / 0.009 = 21.93 sin t (N).
+#   t = 20°: 7.50 N ≤ f_N = 10.14 N → holds; t = 35°: 12.58 N > f_N = 10.47 N → drops.
+def _tilted_end_face(tilt_deg):
+    from pipeline.dataset.scenes import Box
+
+    t = np.radians(tilt_deg)
+    n = np.array([0.0, np.sin(t), -np.cos(t)])
+    c = np.array([0.0, 0.0, 0.5])
+    surf = surface([1, 0, 0], n, 0.092, 0.052, center=c)
+    T_cam_box = np.eye(4)
+    T_cam_box[:3, 3] = c - 0.0725 * n
+    box = Box(instance=1, type_index=1, type_name="medium", size=np.array([0.145, 0.092, 0.052]),
+              T_world_box=np.eye(4), T_cam_box=T_cam_box)
+    T_world_cam = np.diag([1.0, -1.0, -1.0, 1.0])
+    T_world_cam[2, 3] = 0.625
+    return surf, box, T_world_cam
+
+
+@pytest.mark.parametrize("tilt_deg, holds", [(0.0, True), (20.0, True), (35.0, False)])
+def test_hold_check_one_cup_on_a_tilted_end_face(tilt_deg, holds):
+    from pipeline.dexnet.contact import suction_model_config
+    from pipeline.labelling.scene import pattern_holds
+
+    from conftest import composed
+
+    suction = suction_model_config(composed(), 400.0)
+    assert (suction.vacuum_force, suction.cup_radius, suction.gravity) == pytest.approx(
+        (12.7, 0.009, 9.81))
+    surf, box, T_world_cam = _tilted_end_face(tilt_deg)
+    lab = dataclasses.replace(hand_label(surf, CFG), grasp_class=GraspClass.L)
+    assert pattern_holds(surf, lab, box, T_world_cam, suction, CFG.cup_offset) is holds
+    # the same face of a lighter box (100 kg/m³: m g = 0.6805 N) holds at 35° too: bending
+    # 0.0725 × 0.6805 × 0.5736 / 0.009 = 3.14 N ≤ f_N = 12.7 - 0.6805 × 0.8192 = 12.14 N
+    light = suction_model_config(composed(), 100.0)
+    assert pattern_holds(surf, lab, box, T_world_cam, light, CFG.cup_offset)

@@ -50,12 +50,13 @@ def test_label_artifact(labelled):
             on_box = scene.mask[v, u] == rows["instance"]
             off = ~on_box & (rows["hand_class"] != GraspClass.NG)
             assert not off.any()
-            # NG exactly when a reason is recorded; hand-level NG is "too_small" or
-            # "center_occluded".
+            # NG exactly when a reason is recorded; hand-level NG is "too_small",
+            # "center_occluded" or "hold" (the hold check, hand.hold_check).
             assert ((rows["grasp_class"] == GraspClass.NG) == (rows["ng_reason"] > 0)).all()
             hand_ng = rows["hand_class"] == GraspClass.NG
             assert np.isin(rows["ng_reason"][hand_ng],
-                           [NG_REASONS.index("too_small"), NG_REASONS.index("center_occluded")]).all()
+                           [NG_REASONS.index(r)
+                            for r in ("too_small", "center_occluded", "hold")]).all()
             # The robot check only ever turns a hand-level class into NG.
             kept = rows["grasp_class"] != GraspClass.NG
             assert (rows["grasp_class"][kept] == rows["hand_class"][kept]).all()

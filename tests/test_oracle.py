@@ -22,7 +22,8 @@ def test_oracle_candidates_equal_the_labels(smoke_cfg):
         oracle = OraclePlanner(cfg, cell)
         cands = oracle(frame.depth_m, cell.intrinsics, None, frame=frame)
         scene = oracle.scene(frame, cell.intrinsics)
-        rows, _, _, _ = label_scene(scene, cfg, RobotChecker(cfg), cfg.bin)
+        rows, _, _, _ = label_scene(scene, cfg, RobotChecker(cfg), cfg.bin,
+                                    density=float(cfg.eval_boxes.density))
     finally:
         cell.close()
     ok = rows["grasp_class"] != int(GraspClass.NG)

@@ -199,6 +199,8 @@ class HandConfig:
     tie_tolerance: float = MISSING  # L/R camera heights closer than this: a tie (→ L)
     # hand rotations about the normal tried by the robot-level checks, in order (0 = paper)
     rotations_deg: List[float] = MISSING
+    # labels: a pattern whose cups would not hold the box's weight (the suction hold test) is NG
+    hold_check: bool = MISSING
 
 
 @dataclass

@@ -2,6 +2,16 @@
 
 ``label_scene`` is what the labelling stage runs per scene and what the oracle planner runs on
 the closed loop's home image; its rows are ``pipeline.dataset.labels.LABEL_FIELDS``.
+
+Hold check (``hand.hold_check``, not in the paper): a B, L or R whose cups fit on the face is
+NG ("hold") when the closed loop's hold test (``pipeline.picking.suction.hold_test``: pull,
+shear, torsion, bending) says the cups would not carry the box's weight. The cups sit where the
+pattern puts them (L, R: one cup on the surface centre; B: the centre ± ``cup_offset`` along the
+hand's Y), the approach axis is the anti-normal, the box's mass is density × volume and its
+centre of mass its centre (the simulator's boxes are uniform), and gravity is the world's −z
+seen in the camera frame. The paper's rule (Fig. 6e) only checks that one cup fits, so a
+medium box on a tilted face, whose centre of mass lies far to the side of the one cup, is
+labelled L or R and dropped.
 """
 
 from __future__ import annotations
@@ -12,12 +22,14 @@ import time
 import numpy as np
 
 from pipeline.config.build import from_section
-from pipeline.dataset.scenes import Scene
+from pipeline.dataset.scenes import Box, Scene
+from pipeline.dexnet.contact import SuctionModelConfig, suction_model_config
 from pipeline.labelling.hand import hand_label
 from pipeline.labelling.surfaces import (
     SurfaceDetectionConfig, detect_surfaces, match_surfaces, true_visible_faces,
 )
-from pipeline.labelling.types import NG_REASONS, GraspClass
+from pipeline.labelling.hand import HandLabel
+from pipeline.labelling.types import NG_REASONS, GraspClass, Surface
 
 
 def surface_config(cfg) -> SurfaceDetectionConfig:
@@ -25,12 +37,47 @@ def surface_config(cfg) -> SurfaceDetectionConfig:
     return from_section(SurfaceDetectionConfig, cfg.surfaces)
 
 
-def label_scene(scene: Scene, cfg, robot=None, bin_cfg=None
+def pattern_holds(surface: Surface, hl: HandLabel, box: Box, T_world_cam: np.ndarray,
+                  suction: SuctionModelConfig, cup_offset: float) -> bool:
+    """Whether ``hl``'s pattern, its cups placed on ``surface`` as the pattern puts them, holds
+    ``box``'s weight by ``pipeline.picking.suction.hold_test`` (module docstring).
+
+    Frames: ``surface`` and ``box.T_cam_box`` in the camera frame, ``T_world_cam`` the camera's
+    pose in the world (z up); metres. ``suction``: cup radius, vacuum force, friction, gravity
+    (m/s²) and the boxes' density (kg/m³).
+    """
+    from pipeline.picking.suction import hold_test
+
+    n = np.asarray(surface.normal_cam, np.float64)
+    c = np.asarray(surface.center_cam, np.float64)
+    if hl.grasp_class == GraspClass.B:
+        y = np.cross(-n, np.asarray(hl.x_axis_cam, np.float64))  # hand y = z × x, z = −n
+        y /= np.linalg.norm(y)
+        points = np.stack([c - cup_offset * y, c + cup_offset * y])
+    else:
+        points = c[None]
+    gravity_cam = T_world_cam[:3, :3].T @ np.array([0.0, 0.0, -suction.gravity])
+    mass = suction.density * float(np.prod(box.size))
+    return hold_test(mass, box.T_cam_box[:3, 3], points, -n, gravity_cam, suction,
+                     cup_offset).ok
+
+
+def label_scene(scene: Scene, cfg, robot=None, bin_cfg=None, density: float | None = None
                 ) -> tuple[dict[str, np.ndarray], dict, float, float]:
     """Grasp points of one scene: (rows, accuracy match record, surface seconds, robot seconds).
 
     ``bin_cfg``: the bin the scene was generated in (robot-level collision checks).
+    ``density``: the boxes' density, kg/m³, for the hold check (``boxes.density`` for generated
+    heaps, ``eval_boxes.density`` in the closed loop); needed when ``hand.hold_check`` is on.
     """
+    suction = None
+    if cfg.hand.hold_check:
+        if density is None:
+            raise ValueError("label_scene: hand.hold_check is on but no box density was given; "
+                             "pass density= (boxes.density for generated heaps, "
+                             "eval_boxes.density in the closed loop) or set "
+                             "hand.hold_check=false")
+        suction = suction_model_config(cfg, density)
     t0 = time.perf_counter()
     # Labels come from the ideal depth (the simulator's geometry): with a sensor model the
     # network sees noisy depth with holes but learns where the true surfaces are.
@@ -52,6 +99,10 @@ def label_scene(scene: Scene, cfg, robot=None, bin_cfg=None
             # The centre of the visible region falls on another box (a box lying across this
             # face): a cup placed there would not touch this surface.
             hl = dataclasses.replace(hl, grasp_class=GraspClass.NG, reason="center_occluded")
+        if (suction is not None and hl.grasp_class != GraspClass.NG
+                and not pattern_holds(s, hl, scene.boxes[s.instance - 1], scene.T_world_cam,
+                                      suction, float(cfg.hand.cup_offset))):
+            hl = dataclasses.replace(hl, grasp_class=GraspClass.NG, reason="hold")
         final, reason = hl.grasp_class, hl.reason or ""
         if robot is not None and final != GraspClass.NG:
             reason = robot.check(s, hl, cfg.hand) or ""

@@ -60,7 +60,8 @@ class OraclePlanner:
         from pipeline.labelling.scene import label_scene
 
         scene = self.scene(frame, intrinsics)
-        rows, _, _, _ = label_scene(scene, self.cfg, self.robot, self.cfg.bin)
+        rows, _, _, _ = label_scene(scene, self.cfg, self.robot, self.cfg.bin,
+                                    density=float(self.cfg.eval_boxes.density))
         preds = []
         for uv, cls in zip(rows["uv"], rows["grasp_class"]):
             if int(cls) == int(GraspClass.NG):

@@ -34,7 +34,8 @@ LABEL_FIGURE = "figures/labels_sample.png"
 # the robot level at the whole robot in the scene.
 NG_REASON_LEVEL = {"too_small": "hand", "center_occluded": "hand", "ik": "robot",
                    "joint_limits": "robot", "collision": "robot", "path_collision": "robot",
-                   "path_joint_limits": "robot", "path_timeout": "robot", "path_lost": "robot"}
+                   "path_joint_limits": "robot", "path_timeout": "robot", "path_lost": "robot",
+                   "hold": "hand"}
 NG_REASON_MEANING = {
     "too_small": "the cups do not fit on the visible surface",
     "center_occluded": "the centre of the visible region lies on another box",
@@ -48,6 +49,7 @@ NG_REASON_MEANING = {
     "path_timeout": "the servo from home, predicted on the exact surface, does not converge "
                     "in time",
     "path_lost": "the servo from home, predicted on the exact surface, loses sight of it",
+    "hold": "the cups fit, but would not hold the box's weight (hold test; hand.hold_check)",
 }
 # (manifest key, column header, Markdown format) of the surface-accuracy table.
 ACCURACY_COLUMNS = (
