@@ -319,6 +319,8 @@ def evaluate(cfg: DictConfig) -> Path:
         raise ValueError(f"evaluate.num_trials must be >= 1, got {cfg.evaluate.num_trials}")
     check_renderer(str(cfg.camera.renderer))
     _check_choice("evaluate.retry_policy is", str(cfg.evaluate.retry_policy), RETRY_POLICIES)
+    for outcome in cfg.evaluate.retry_point_outcomes:
+        _check_choice("evaluate.retry_point_outcomes has", str(outcome), OUTCOMES[1:])
     check_approach(str(cfg.motion.approach))
     upstream, train_dir, baseline_dir = {}, None, None
     if "dcnn" in planners:

@@ -141,6 +141,22 @@ def _add_cube(runner, xy):
     return body
 
 
+def test_a_failure_at_the_point_skips_every_pattern_there(runner):
+    """After a lost target or a seal that did not form (``evaluate.retry_point_outcomes``), the
+    point failed, not the pattern: B, L and R there are all repeats while the heap is
+    unchanged; 5 cm away is a new plan. After a drop only the dropped pattern is."""
+    (body,) = list(runner.cell.boxes)
+    P = np.array([0.0, 0.0, 0.052])
+    assert list(runner.cfg.evaluate.retry_point_outcomes) == ["lost_target", "no_seal"]
+    for outcome in ("lost_target", "no_seal"):
+        failed = [{**runner.failure_record(body, "B", P), "outcome": outcome}]
+        assert all(runner._repeats_failure(body, pat, P, failed) for pat in ("B", "L", "R"))
+        assert not runner._repeats_failure(body, "L", P + [0.05, 0, 0], failed)
+    failed = [{**runner.failure_record(body, "B", P), "outcome": "dropped"}]
+    assert runner._repeats_failure(body, "B", P, failed)
+    assert not runner._repeats_failure(body, "L", P, failed)
+
+
 def test_a_retry_is_new_once_the_heap_around_it_changes(runner):
     """The failed plan on the medium box at the bin centre (P = its top face centre) stays
     skipped while its surroundings are as they were; a cube whose centre was 0.10 m from P

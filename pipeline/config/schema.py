@@ -468,6 +468,8 @@ class EvaluateConfig:
     retry_moved_m: float = MISSING
     retry_moved_deg: float = MISSING
     retry_neighbour_m: float = MISSING  # boxes this near the failed point are its surroundings
+    # after these outcomes every pattern at the failed point is skipped, not only the failed one
+    retry_point_outcomes: List[str] = MISSING
     face_split_m: float = MISSING  # split the home region at other planner points this far away
     check_hand_fit: bool = MISSING  # the run-time check tests the pattern's cups on the surface
     single_cup_fallback: bool = MISSING  # a rejected B is tried with L, then R

@@ -354,7 +354,9 @@ class PickRunner:
 
     def _repeats_failure(self, target: int, pattern: str, point: np.ndarray | None,
                          failed: list[dict]) -> bool:
-        """With ``evaluate.retry_policy: skip_failed``: the same box, with the same pattern, within
+        """With ``evaluate.retry_policy: skip_failed``: the same box, with the same pattern (any
+        pattern when the failure's ``outcome`` is one of ``evaluate.retry_point_outcomes``: the
+        surface at the point failed, not the pattern), within
         ``retry_same_point_m`` of a failed attempt's point (``failure_record``), while the heap
         around it has not changed: that box has moved less than ``retry_moved_m`` and turned
         less than ``retry_moved_deg`` since the failure, and so has every box whose centre was
@@ -364,8 +366,10 @@ class PickRunner:
         ev = self.cfg.evaluate
         if str(ev.retry_policy) == "repeat" or point is None:
             return False
+        any_pattern = {str(o) for o in ev.retry_point_outcomes}
         for f in failed:
-            if f["body"] != target or f["pattern"] != pattern or \
+            same_plan = f["pattern"] == pattern or f.get("outcome") in any_pattern
+            if f["body"] != target or not same_plan or \
                     np.linalg.norm(point - f["point"]) > float(ev.retry_same_point_m):
                 continue
             if target < 0 or target not in self.cell.boxes:
@@ -776,7 +780,7 @@ class PickRunner:
             attempts.append(att)
             if att.outcome != "success":
                 if record is not None:
-                    failed.append(record)
+                    failed.append({**record, "outcome": att.outcome})
                 failures[att.target_body] = failures.get(att.target_body, 0) + 1
                 if failures[att.target_body] >= int(ev.max_failures_per_target):
                     end = "max_failures"
