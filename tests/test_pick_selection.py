@@ -101,6 +101,30 @@ def test_a_reachable_target_is_chosen_and_a_rejected_one_never(runner):
     np.testing.assert_allclose(left["position"], runner.cell.box_pose(body)[0])
 
 
+def test_the_preferred_clearance_never_rejects_what_the_check_accepts(runner):
+    """The check's first pass asks ``evaluate.preferred_bin_clearance`` from the bin on the
+    servo's path, the second the labels' clearance. The box lies at the bin centre, 0.1 m and
+    more from every wall: its top face passes the first pass (10 mm) with the same hand axis
+    and path as the plain check. A clearance no path has (1 m) fails the first pass at every
+    rotation, and the plain check still accepts the grasp."""
+    from pipeline.picking.trial import _with_bin_clearance
+
+    (body,) = list(runner.cell.boxes)
+    frame, u, v = _pixel_of(runner, [0, 0, 0.052])
+    good = SimpleNamespace(u=u, v=v, grasp_class=GraspClass.B)
+    assert runner.cfg.evaluate.preferred_bin_clearance == pytest.approx(0.01)
+    assert runner._comfort_cfg.robot.path.bin_clearance == pytest.approx(0.01)
+    assert runner.cfg.robot.path.bin_clearance == 0.0  # the caller's config is not changed
+    comfortable = runner._reachable(frame, good, "B", body)
+    runner._comfort_cfg = None
+    plain = runner._reachable(frame, good, "B", body)
+    np.testing.assert_allclose(comfortable.x_world, plain.x_world)
+    assert len(comfortable.path) == len(plain.path)
+    runner._comfort_cfg = _with_bin_clearance(runner.cfg, 1.0)
+    unreachable = runner._reachable(frame, good, "B", body)
+    np.testing.assert_allclose(unreachable.x_world, plain.x_world)
+
+
 def test_a_retry_after_a_failure_differs(runner):
     """A failed plan (box b, pattern B, point P) is skipped while b has not moved; a different
     pattern, a point 5 cm away, or the box moved by 1 cm or turned by 10° make it a new plan."""

@@ -463,6 +463,8 @@ class EvaluateConfig:
     stop_on_box_contact: bool = MISSING  # True: touching any box but the target fails the attempt
     check_reachability: bool = MISSING  # run-time robot-level check of the planned grasp
     max_candidates_checked: int = MISSING
+    # m: the check first asks this clearance from the bin on the servo's path; None: off
+    preferred_bin_clearance: Optional[float] = MISSING
     retry_policy: str = MISSING  # "skip_failed" | "repeat" (the plain protocol)
     retry_same_point_m: float = MISSING
     retry_moved_m: float = MISSING

@@ -177,6 +177,19 @@ def pattern_fits(feats, pattern: str, hand_cfg) -> bool:
         and feats.area >= float(hand_cfg.min_area_ratio) * cups * cup_area
 
 
+def _with_bin_clearance(cfg, clearance: float):
+    """A copy of ``cfg`` whose ``robot.path.bin_clearance`` is ``clearance`` (m)."""
+    import copy
+
+    from omegaconf import DictConfig, OmegaConf
+
+    out = copy.deepcopy(cfg)
+    if isinstance(out, DictConfig):
+        OmegaConf.set_readonly(out, False)
+    out.robot.path.bin_clearance = float(clearance)
+    return out
+
+
 def move_time(dq: np.ndarray, max_speed: float, max_accel: float) -> float:
     """Duration (s) of a synchronised point-to-point move: the slowest joint's trapezoidal
     (or triangular, for short moves) profile at ``max_speed`` (rad/s) and ``max_accel``."""
@@ -209,6 +222,10 @@ class PickRunner:
         self.gripper_factory = lambda: SuctionGripper(cell.client, cell.robot, self.suction_cfg,
                                                       float(cfg.hand.cup_offset))
         self._place_q: np.ndarray | None = None
+        pref = cfg.evaluate.preferred_bin_clearance
+        # the config of the run-time check's first pass (``_check``), None: no first pass
+        self._comfort_cfg = None if pref is None or not bool(cfg.robot.path_check) \
+            else _with_bin_clearance(cfg, max(float(pref), float(cfg.robot.path.bin_clearance)))
         self.oracle = None  # the labels' planner of ``diagnosis.labels_at_no_grasp``, when needed
         # wall time of the parts of a control step (seconds, one entry per call)
         self.timings: dict[str, list[float]] = {
@@ -430,7 +447,11 @@ class PickRunner:
         ``robot.path_check``, the servo's predicted motion from home to it): the descriptor must
         find the surface at the point (a failure is a rejection); camera X along the surface
         axis nearer the image X, turned about the normal by the first of ``hand.rotations_deg``
-        that works.
+        that works. With ``evaluate.preferred_bin_clearance`` (not the paper), the rotations are
+        first tried with that much clearance from the bin on the servo's path, then, when none
+        has it, with ``robot.path.bin_clearance``: a hand turn that keeps the idle cup away from
+        a wall is preferred to the paper's turn that grazes it, and nothing the plain check
+        accepts is rejected.
 
         The surface is the one the servo will track: split at the other candidates of ``cands``
         (``_home_surface``).
@@ -453,12 +474,17 @@ class PickRunner:
         # centre of the surface the descriptor finds at the candidate (what the servo tracks)
         fixed = self._fixed_point(cand)
         centre = feats.center_cam if fixed is None else fixed
-        check = check_grasp(self.cell.robot, self.cfg, self.cfg.hand, frame.T_world_cam, centre,
-                            feats.normal_cam, feats.long_axis_cam, feats.short_axis_cam,
-                            paper_x_axis(feats), pattern, self.cell.intrinsics,
-                            self.cell.obstacles, [target] if target >= 0 else [],
-                            self.cell.cell_ids[1:])
-        return (check, None, sites) if check.reason is None else (None, str(check.reason), None)
+        for cfg in (self._comfort_cfg, self.cfg):
+            if cfg is None:
+                continue
+            check = check_grasp(self.cell.robot, cfg, self.cfg.hand, frame.T_world_cam, centre,
+                                feats.normal_cam, feats.long_axis_cam, feats.short_axis_cam,
+                                paper_x_axis(feats), pattern, self.cell.intrinsics,
+                                self.cell.obstacles, [target] if target >= 0 else [],
+                                self.cell.cell_ids[1:])
+            if check.reason is None:
+                return check, None, sites
+        return None, str(check.reason), None
 
     def _first_goal(self, centre_cam: np.ndarray, feats, ref_cam, pattern: str,
                     T_world_cam: np.ndarray):
