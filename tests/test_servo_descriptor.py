@@ -411,3 +411,26 @@ def test_two_coplanar_faces_side_by_side_split_at_their_seam():
     # one site only (or none) is the whole region
     one, _ = describe_surface(depth, SR300, seed, descriptor(), sites_cam=sites[:1])
     assert one.num_pixels == whole.num_pixels
+
+
+def test_tracking_keeps_the_plane_not_only_its_orientation():
+    """A window whose points lie on two parallel planes facing the camera, 140 on the bin floor
+    at z = 0.50 m and 60 on a cube's top at z = 0.43 m. Tracking the orientation alone
+    (normal (0, 0, -1)) takes the larger slab, the floor: offset n · P = -0.50. With a point of
+    the tracked top carried into the frame (z = 0.431) and 1 cm of tolerance, the plane is the
+    top's (-0.43); with the tracked plane 3 cm from either slab, it is the tracked plane itself."""
+    from pipeline.servo.descriptor import _tracked_plane
+
+    cfg = default_config(DescriptorConfig)
+    rng = np.random.default_rng(0)
+    floor = np.c_[rng.uniform(-0.02, 0.02, (140, 2)), np.full(140, 0.50)]
+    top = np.c_[rng.uniform(-0.02, 0.02, (60, 2)), np.full(60, 0.43)]
+    win = np.vstack([floor, top])
+    seed = np.array([0.0, 0.0, 0.43])
+    n_down = np.array([0.0, 0.0, -1.0])
+    n, c = _tracked_plane(win, seed, cfg, n_down)
+    assert n == pytest.approx(n_down) and c == pytest.approx(-0.50)
+    n, c = _tracked_plane(win, seed, cfg, n_down, np.array([0.01, 0.0, 0.431]), 0.01)
+    assert c == pytest.approx(-0.43)
+    n, c = _tracked_plane(win, seed, cfg, n_down, np.array([0.0, 0.0, 0.46]), 0.01)
+    assert c == pytest.approx(-0.46)

@@ -473,6 +473,8 @@ class EvaluateConfig:
     # after these outcomes every pattern at the failed point is skipped, not only the failed one
     retry_point_outcomes: List[str] = MISSING
     face_split_m: float = MISSING  # split the home region at other planner points this far away
+    # m: the servo's tracked plane may move this far between frames; None: its normal only
+    track_offset_m: Optional[float] = MISSING
     check_hand_fit: bool = MISSING  # the run-time check tests the pattern's cups on the surface
     single_cup_fallback: bool = MISSING  # a rejected B is tried with L, then R
     min_area_ratio: float = MISSING  # 0: off (paper); 1.2: Sec. 8.4's surface-area safety check

@@ -602,6 +602,9 @@ class PickRunner:
         executed = [robot.camera_pose()[:3, 3]]
         seed = np.array([cand.u, cand.v], np.float64)
         normal_world = None  # the tracked surface's normal (world), from the previous frame
+        g_world = None  # and its centre g′ (world)
+        track_offset = cfg.evaluate.track_offset_m
+        track_offset = None if track_offset is None else float(track_offset)
         limit_hits = 0
         steps_max = int(math.ceil(float(cfg.servo.timeout_s) / self.dt))
         converged = False
@@ -613,10 +616,15 @@ class PickRunner:
             td = time.perf_counter()
             # the tracked surface's normal, carried into this frame by the camera's motion
             expected = None if normal_world is None else frame.T_world_cam[:3, :3].T @ normal_world
+            # and a point of it (the previous g′): the plane itself, not only its orientation
+            on_plane = None if g_world is None or track_offset is None else \
+                world_to_camera(g_world[None], frame.T_world_cam)[0]
             feats, reason = describe_surface(frame.depth_m, intr, seed, self.descriptor_cfg,
                                              expected_normal_cam=expected,
                                              sites_cam=None if sites_world is None else
-                                             world_to_camera(sites_world, frame.T_world_cam))
+                                             world_to_camera(sites_world, frame.T_world_cam),
+                                             expected_point_cam=on_plane,
+                                             offset_tolerance=track_offset)
             self.timings["descriptor_s"].append(time.perf_counter() - td)
             if feats is None:
                 att.outcome, att.lost_reason = "lost_target", str(reason)

@@ -275,7 +275,9 @@ def _rules(X: np.ndarray, Y: np.ndarray, Z: np.ndarray, valid: np.ndarray, xn: n
 
 
 def _window_plane(win: np.ndarray, seed_point: np.ndarray, cfg: DescriptorConfig,
-                  expected: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+                  expected: np.ndarray | None = None,
+                  expected_point: np.ndarray | None = None,
+                  offset_tolerance: float | None = None) -> tuple[np.ndarray, float]:
     """Eq. 11: the plane (n̂ towards the camera, c = n̂ · P) of the (N, 3) window points, N ≥ 10.
 
     With ``cfg.window_hypotheses`` > 0 the points are first restricted to the seed's surface
@@ -285,10 +287,11 @@ def _window_plane(win: np.ndarray, seed_point: np.ndarray, cfg: DescriptorConfig
     the one with most points is kept, and its points are fitted. Then ``cfg.window_refits``
     least-squares refits on the points within ε1. With ``cfg.window_tolerance_depth`` the
     hypotheses' tolerance shrinks with the seed's depth (see ``DescriptorConfig``). With an
-    ``expected`` unit normal (3,) and ``cfg.track_normal_deg``: :func:`_tracked_plane`.
+    ``expected`` unit normal (3,) and ``cfg.track_normal_deg``: :func:`_tracked_plane` (with
+    ``expected_point`` and ``offset_tolerance``, if given).
     """
     if expected is not None and cfg.track_normal_deg > 0:
-        return _tracked_plane(win, seed_point, cfg, expected)
+        return _tracked_plane(win, seed_point, cfg, expected, expected_point, offset_tolerance)
     used = np.ones(len(win), dtype=bool)
     if cfg.window_hypotheses > 0:
         rng = np.random.default_rng(0)
@@ -331,19 +334,33 @@ def _hypothesis_tolerance(seed_point: np.ndarray, cfg: DescriptorConfig) -> floa
 
 
 def _tracked_plane(win: np.ndarray, seed_point: np.ndarray, cfg: DescriptorConfig,
-                   expected: np.ndarray) -> tuple[np.ndarray, float]:
+                   expected: np.ndarray, expected_point: np.ndarray | None = None,
+                   offset_tolerance: float | None = None) -> tuple[np.ndarray, float]:
     """The window plane while tracking a surface of known normal ``expected`` (3,, unit): the
     plane of that normal through the window point that most window points lie within the
     hypotheses' tolerance of (the largest slab of the tracked orientation), its offset the mean
     of those points'. A seed carried to the next frame can sit on the edge or the next face of
     a box; the window's own best plane is then one across both faces, and the region grown
     from it is the wrong face or nothing. The region found from this plane is refitted
-    (``cfg.refine``), so the surface's normal is measured afresh in every frame."""
+    (``cfg.refine``), so the surface's normal is measured afresh in every frame.
+
+    With ``expected_point`` (3,), a point of the tracked surface carried into this frame, and
+    ``offset_tolerance`` (m): only the slabs within that distance of the tracked plane count.
+    Parallel planes share the normal: the top of a cube and the bin floor 7 cm below it both
+    face the camera, and a window mostly on the floor made the servo follow the floor. When no
+    window point is that near, the plane is the tracked one (the region grows from it, or
+    nothing grows: the target is lost)."""
     n = np.asarray(expected, np.float64)
     n = n if n @ seed_point < 0 else -n  # towards the camera, as fit_plane's
     tol = _hypothesis_tolerance(seed_point, cfg)
     d = win @ n
     counts = (np.abs(d[None, :] - d[:, None]) < tol).sum(axis=1)  # (N,) per candidate offset
+    if expected_point is not None and offset_tolerance is not None:
+        tracked = float(n @ np.asarray(expected_point, np.float64))
+        near = np.abs(d - tracked) < offset_tolerance
+        if not near.any():
+            return n, tracked
+        counts = np.where(near, counts, -1)
     used = np.abs(d - d[int(np.argmax(counts))]) < tol
     return n, float(d[used].mean())
 
@@ -359,7 +376,9 @@ def split_region(points: np.ndarray, sites: np.ndarray) -> np.ndarray:
 def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
                      cfg: DescriptorConfig,
                      expected_normal_cam: np.ndarray | None = None,
-                     sites_cam: np.ndarray | None = None
+                     sites_cam: np.ndarray | None = None,
+                     expected_point_cam: np.ndarray | None = None,
+                     offset_tolerance: float | None = None,
                      ) -> tuple[SurfaceFeatures | None, str]:
     """Surface features of the planar surface at ``seed_uv`` (paper Sec. 5.1; see the module
     docstring for the algorithm).
@@ -378,6 +397,9 @@ def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
             pixels nearer to the first site than to every other, before the plane and the
             rectangle are fitted. The closed loop passes the planner's points of other faces
             that lie in the region, where coplanar faces of two boxes grew into one region.
+        expected_point_cam, offset_tolerance: (3,) optional, a point of the tracked surface in
+            this camera frame, metres, and how far (m) the surface's plane may be from it along
+            the expected normal (not the paper; with ``expected_normal_cam``: ``_tracked_plane``).
 
     Returns:
         (features, "") when a surface is found, else (None, reason) with reason one of
@@ -454,7 +476,8 @@ def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
     if expected_normal_cam is not None and cfg.track_normal_deg > 0:
         expected = np.asarray(expected_normal_cam, np.float64)
         expected = expected / np.linalg.norm(expected)
-    n_hat, c_hat = _window_plane(win, seed_point, cfg, expected)
+    n_hat, c_hat = _window_plane(win, seed_point, cfg, expected, expected_point_cam,
+                                 offset_tolerance)
     d_hat = -c_hat  # n̂ · P + D̂ = 0 with n̂ towards the camera
 
     # (2)–(3) Eqs. 12–14, on the crop that can hold the region: the region is one connected
