@@ -116,7 +116,8 @@ def render_figures(cfg, num_heaps: int = 6, repeats: int = 5) -> dict[str, float
     (``closeup_poses``). Median ms per 416 × 416 depth + mask frame of each and their ratio."""
     from pipeline.camera.geometry import Intrinsics, camera_pose_above_bin
     from pipeline.camera.render import render_depth
-    from pipeline.simulation.heap import build_cell, drop_heap
+    from pipeline.cell.bin import build_cell
+    from pipeline.simulation.heap import drop_heap
     from pipeline.simulation.views import closeup_poses
 
     client = p.connect(p.DIRECT)
@@ -152,7 +153,8 @@ def rest_figures(cfg, num_heaps: int = 24) -> dict[str, float]:
     """Heaps of 20 boxes dropped as the generation stage drops them: settle steps, and how many
     heaps still have a box corner moving more than 2 mm in one more simulated second (the
     check of ``tests/test_generate.py::test_heaps_of_20_really_at_rest``, same seeds)."""
-    from pipeline.simulation.heap import build_cell, corner_drift, drop_heap
+    from pipeline.cell.bin import build_cell
+    from pipeline.simulation.heap import corner_drift, drop_heap
 
     client = p.connect(p.DIRECT)
     boxes = dataclasses.replace(cfg.boxes, min_count=20, max_count=20)
@@ -314,7 +316,7 @@ def planning_times(cfg, num_images: int = 8, repeats: int = 3) -> dict[str, floa
 
     from pipeline.artifacts.fingerprint import REPO_ROOT
     from pipeline.cli import compose
-    from pipeline.planner.data import Normalisation
+    from pipeline.planner.normalisation import Normalisation
     from pipeline.planner.network import GraspNet, network_config
     from pipeline.planner.planner import Planner, fallback_threshold, ranking_config
     torch.set_num_threads(2)
@@ -374,7 +376,8 @@ def _training_memory_child(experiment: str, root: str | None, steps: int, loader
     from pipeline.planner.data import GraspDataset, make_loader
     from pipeline.planner.distributed import DistContext
     from pipeline.planner.loss import grasp_loss, loss_config
-    from pipeline.planner.data import epoch_batches, normalisation
+    from pipeline.planner.data import epoch_batches
+    from pipeline.planner.normalisation import normalisation
     from pipeline.planner.network import GraspNet, network_config
 
     overrides = [f"experiment={experiment}"] + ([f"paths.root={root}"] if root else [])
@@ -538,9 +541,9 @@ def closed_loop_figures(cfg_name: str = "evaluate", renderer: str | None = None,
 
     from pipeline.cli import compose
     from pipeline.dexnet.planner import DexNetPlanner
-    from pipeline.labelling.robot_check import robot_config
-    from pipeline.picking.cell import PickCell
-    from pipeline.picking.trial import PickRunner
+    from pipeline.robot.model import robot_config
+    from pipeline.world.cell import PickCell
+    from pipeline.world.trial import PickRunner
     from pipeline.robot.model import Robot
     from pipeline.servo.descriptor import describe_surface
 

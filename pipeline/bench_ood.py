@@ -25,7 +25,7 @@ from pipeline.camera.render import render_depth
 from pipeline.cli import compose
 from pipeline.dexnet.contact_mesh import RayScene
 from pipeline.dexnet.ood import connect, object_heap_scene, object_scene_rng
-from pipeline.simulation.heap import build_cell
+from pipeline.cell.bin import build_cell
 from pipeline.simulation.object_heap import drop_object_heap
 
 

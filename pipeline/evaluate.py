@@ -7,7 +7,7 @@ For every planner in ``evaluate.planners`` (``dcnn``: the training artifact
 variant ``evaluate.dexnet_variant``; ``dexnet_ood``: the same artifact's GQ-CNN trained on
 non-box objects, variant ``gqcnn_ood``; ``oracle``: the labels on the home image) and every trial, the same heap (seed (seed, 31, trial)) of
 ``evaluate.boxes_per_trial`` boxes of ``eval_boxes`` is dropped into the bin and the robot
-picks until the trial ends (``pipeline.picking.trial``). Trials run in parallel processes; the
+picks until the trial ends (``pipeline.world.trial``). Trials run in parallel processes; the
 artifact does not depend on the number of workers.
 
 Every depth image the robot takes (at home and in every servo step) goes through the ``sensor``
@@ -51,7 +51,7 @@ from pipeline.artifacts.store import StageRun
 from pipeline.camera.render import check_renderer
 from pipeline.cli import CONF_DIR, data_root, stage_main
 from pipeline.executor import map_shards, resolve_workers
-from pipeline.picking.trial import (
+from pipeline.world.trial import (
     OUTCOMES, RETRY_POLICIES, TRIAL_ENDS, PickRunner, TrialResult,
 )
 from pipeline.robot.approach import check_approach
@@ -110,7 +110,7 @@ def _init_worker(cfg_obj, train_dir: str | None, baseline_dir: str | None) -> No
 def make_planner(cfg, name: str, train_dir: str | None, baseline_dir: str | None, T_home,
                  cell=None):
     """``plan(depth_m, intrinsics, rng)`` for planner ``name`` (``oracle``: also ``frame=``; it
-    reads the ``cell``'s true box poses, ``pipeline.picking.oracle``)."""
+    reads the ``cell``'s true box poses, ``pipeline.world.oracle``)."""
     if name == "dcnn":
         from pipeline.planner.planner import Planner, fallback_threshold, ranking_config
 
@@ -128,7 +128,7 @@ def make_planner(cfg, name: str, train_dir: str | None, baseline_dir: str | None
             else 1
         return lambda depth, intr, rng: dex.plan(depth, intr, rng=rng, max_grasps=k)
     if name == "oracle":
-        from pipeline.picking.oracle import OraclePlanner
+        from pipeline.world.oracle import OraclePlanner
 
         return OraclePlanner(cfg, cell)
     raise ValueError(f"unknown planner {name!r}: choose from {PLANNERS}")
@@ -136,8 +136,8 @@ def make_planner(cfg, name: str, train_dir: str | None, baseline_dir: str | None
 
 def _runner(name: str) -> PickRunner:
     if name not in _STATE["runners"]:
-        from pipeline.labelling.robot_check import robot_config
-        from pipeline.picking.cell import PickCell
+        from pipeline.robot.model import robot_config
+        from pipeline.world.cell import PickCell
         from pipeline.robot.model import Robot
 
         cfg = _STATE["cfg"]

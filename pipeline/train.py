@@ -76,7 +76,8 @@ from pipeline.labelling.types import CLASS_COLORS, GraspClass
 from pipeline.planner.augment import FLIPS
 from pipeline.planner.calibration import choose_threshold, threshold_curve
 from pipeline.planner import distributed
-from pipeline.planner.data import GraspDataset, epoch_batches, make_loader, normalisation
+from pipeline.planner.data import GraspDataset, epoch_batches, make_loader
+from pipeline.planner.normalisation import normalisation
 from pipeline.planner.evaluate import downsample_curve
 from pipeline.planner.loss import LossConfig, grasp_loss, loss_config
 from pipeline.planner.network import GraspNet, count_flops, count_parameters, network_config

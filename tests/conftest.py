@@ -48,7 +48,8 @@ def _config_builders() -> dict:
     )
     from pipeline.dexnet.quality import PlanarityConfig
     from pipeline.dexnet.sampling import SamplerConfig
-    from pipeline.labelling.robot_check import path_config, robot_config
+    from pipeline.robot.model import robot_config
+    from pipeline.robot.path import path_config
     from pipeline.labelling.scene import surface_config
     from pipeline.labelling.surfaces import SurfaceDetectionConfig
     from pipeline.planner.loss import LossConfig, loss_config

@@ -33,7 +33,7 @@ from pipeline.dexnet.planner import NO_GRASP_REASONS as DEX_REASONS
 from pipeline.dexnet.planner import DexNetPlanner, Workspace, load_gqcnn
 from pipeline.dexnet.quality import PlanarityConfig
 from pipeline.dexnet.sampling import SamplerConfig
-from pipeline.planner.data import Normalisation
+from pipeline.planner.normalisation import Normalisation
 from pipeline.planner.network import GraspNet, NetworkConfig
 from pipeline.planner.planner import NO_GRASP_REASONS as DCNN_REASONS
 from pipeline.planner.planner import ModelFileError, Planner

@@ -13,7 +13,7 @@ from pipeline.camera.geometry import (
     world_to_camera,
 )
 from pipeline.camera.render import render_depth
-from pipeline.simulation.heap import build_cell
+from pipeline.cell.bin import build_cell
 
 SR300 = Intrinsics(416, 416, 411.7, 411.7, 207.5, 207.5)
 CAM_HEIGHT = 0.625

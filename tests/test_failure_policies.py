@@ -13,8 +13,8 @@ import pytest
 from conftest import default_config
 from pipeline.camera.geometry import Intrinsics
 from pipeline.labelling.types import GraspClass
-from pipeline.picking.cell import Frame
-from pipeline.picking.trial import PickRunner
+from pipeline.world.cell import Frame
+from pipeline.world.trial import PickRunner
 from pipeline.planner.ranking import GraspCandidate, RankingConfig, graspability, order_candidates
 from pipeline.servo.descriptor import DescriptorConfig
 

@@ -62,7 +62,8 @@ def test_heaps_of_20_really_at_rest(client, sim_cfg):
     """24 heaps of 20 boxes (the bench's rest check, same seeds): after the rest criterion
     fires, one more simulated second moves no corner of any box by more than 2 mm."""
     from pipeline.bench import rest_check_rng
-    from pipeline.simulation.heap import build_cell, drop_heap
+    from pipeline.cell.bin import build_cell
+    from pipeline.simulation.heap import drop_heap
 
     boxes = dataclasses.replace(sim_cfg.boxes, min_count=20, max_count=20)
     one_second = int(round(1.0 / sim_cfg.physics.time_step))
@@ -84,7 +85,7 @@ def test_settle_declares_rest_by_displacement_over_a_window(client, sim_cfg):
     within 0.5 mm of where it is now at each of them, so a still box is at rest at step 60. At
     4 mm/s a corner moves 4 / 240 × 60 = 1 mm per window, twice the tolerance.
     """
-    from pipeline.simulation.heap import build_cell
+    from pipeline.cell.bin import build_cell
 
     build_cell(client, sim_cfg.bin, sim_cfg.physics)
     p.setGravity(0, 0, 0, physicsClientId=client)
@@ -276,7 +277,8 @@ def test_jittered_size_draws_per_edge_and_nothing_at_zero():
 
 
 def test_jittered_heap_bodies_have_their_drawn_size_and_mass(client, sim_cfg):
-    from pipeline.simulation.heap import build_cell, drop_heap
+    from pipeline.cell.bin import build_cell
+    from pipeline.simulation.heap import drop_heap
 
     build_cell(client, sim_cfg.bin, sim_cfg.physics)
     heap = drop_heap(client, np.random.default_rng(11), sim_cfg.boxes, sim_cfg.bin,

@@ -8,10 +8,11 @@ import numpy as np
 
 def test_oracle_candidates_equal_the_labels(smoke_cfg):
     from pipeline.labelling.scene import label_scene
-    from pipeline.labelling.robot_check import RobotChecker, robot_config
+    from pipeline.labelling.robot_check import RobotChecker
+    from pipeline.robot.model import robot_config
     from pipeline.labelling.types import GraspClass
-    from pipeline.picking.cell import PickCell
-    from pipeline.picking.oracle import OraclePlanner
+    from pipeline.world.cell import PickCell
+    from pipeline.world.oracle import OraclePlanner
     from pipeline.robot.model import Robot
 
     cfg = smoke_cfg("evaluate", "evaluate.boxes_per_trial=8")

@@ -22,9 +22,9 @@ from pipeline.labelling.types import GraspClass
 
 def _one_box_runner(smoke_cfg, name: str, size: list[float]):
     """A PickRunner whose cell holds one box of ``size`` (m) flat at the bin centre, at rest."""
-    from pipeline.labelling.robot_check import robot_config
-    from pipeline.picking.cell import PickCell
-    from pipeline.picking.trial import PickRunner
+    from pipeline.robot.model import robot_config
+    from pipeline.world.cell import PickCell
+    from pipeline.world.trial import PickRunner
     from pipeline.robot.model import Robot
 
     cfg = smoke_cfg("evaluate", "evaluate.boxes_per_trial=1",
@@ -107,7 +107,7 @@ def test_the_preferred_clearance_never_rejects_what_the_check_accepts(runner):
     more from every wall: its top face passes the first pass (10 mm) with the same hand axis
     and path as the plain check. A clearance no path has (1 m) fails the first pass at every
     rotation, and the plain check still accepts the grasp."""
-    from pipeline.picking.trial import _with_bin_clearance
+    from pipeline.world.trial import _with_bin_clearance
 
     (body,) = list(runner.cell.boxes)
     frame, u, v = _pixel_of(runner, [0, 0, 0.052])
@@ -345,9 +345,9 @@ def test_lift_is_cut_to_keep_a_steep_face_in_view(runner):
 def two_boxes(smoke_cfg):
     """Two medium boxes (145 × 92 × 52 mm) lying flat side by side, touching along y = 0: their
     top faces are coplanar at z = 52 mm, centred at (0, ±0.046, 0.052)."""
-    from pipeline.labelling.robot_check import robot_config
-    from pipeline.picking.cell import PickCell
-    from pipeline.picking.trial import PickRunner
+    from pipeline.robot.model import robot_config
+    from pipeline.world.cell import PickCell
+    from pipeline.world.trial import PickRunner
     from pipeline.robot.model import Robot
 
     cfg = smoke_cfg("evaluate", "evaluate.boxes_per_trial=2",
@@ -407,7 +407,7 @@ def test_pattern_fits_by_the_hand_level_rule(smoke_cfg):
     centre (9 mm) fits: L, R. X along the short axis: Y half-length 72.5 mm ≥ 44 mm and
     9 mm ≤ 26 mm: B fits. A 90 × 90 mm face: 44 mm ≤ 45 mm, B fits (the labels' 2 mm margin
     would say no). Area: B needs 1.2 × 2 × π 9² mm² = 610.7 mm², one cup 305.4 mm²."""
-    from pipeline.picking.trial import pattern_fits
+    from pipeline.world.trial import pattern_fits
 
     hand = smoke_cfg("evaluate").hand
     face = dict(long_length=0.145, short_length=0.052, area=0.145 * 0.052)
@@ -433,7 +433,7 @@ def test_pattern_fits_by_the_hand_level_rule(smoke_cfg):
 def test_the_labels_are_asked_only_when_wanted(smoke_cfg):
     """``evaluate.label_no_grasp=false``: a "no grasp" end records the planner's figures alone;
     the oracle's own trials are never asked (it is the labels)."""
-    from pipeline.picking.trial import PickRunner
+    from pipeline.world.trial import PickRunner
 
     r = _one_box_runner(smoke_cfg, "medium", [0.145, 0.092, 0.052])
     try:

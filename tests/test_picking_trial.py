@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from pipeline.picking.trial import move_time
+from pipeline.world.trial import move_time
 
 
 def test_move_time_trapezoid_and_triangle():
@@ -39,9 +39,9 @@ class _Oracle:
 
 
 def test_one_short_pick_succeeds(smoke_cfg):
-    from pipeline.labelling.robot_check import robot_config
-    from pipeline.picking.cell import PickCell
-    from pipeline.picking.trial import PickRunner
+    from pipeline.robot.model import robot_config
+    from pipeline.world.cell import PickCell
+    from pipeline.world.trial import PickRunner
     from pipeline.robot.model import Robot
 
     cfg = smoke_cfg("evaluate", "evaluate.boxes_per_trial=1", "eval_boxes=warehouse",
@@ -101,7 +101,7 @@ def test_a_no_grasp_end_logs_its_home_image(tmp_path):
 
     from pipeline.camera.geometry import Intrinsics
     from pipeline.evaluate import _log_trials
-    from pipeline.picking.trial import TrialResult
+    from pipeline.world.trial import TrialResult
     from pipeline.tracking import StageLog
 
     intr = Intrinsics(width=8, height=6, fx=10.0, fy=10.0, cx=3.5, cy=2.5)

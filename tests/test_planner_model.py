@@ -218,7 +218,7 @@ def test_plan_fallback_tier_follows_eq3_candidates(monkeypatch):
     0.645 m) is 1 − 0.6/0.645 = 0.0698 at the B and L cells and 1 − 0.5/0.645 = 0.2248 at R.
     R outranks L within the second tier, but the tier follows Eq. 3's B whatever its J."""
     from pipeline.camera.geometry import Intrinsics
-    from pipeline.planner.data import Normalisation
+    from pipeline.planner.normalisation import Normalisation
     from pipeline.planner.planner import Planner
     from pipeline.planner.ranking import RankingConfig
 

@@ -29,7 +29,8 @@ from pipeline.camera.raycast import (
 )
 from pipeline.camera.render import render_depth
 from pipeline.cli import compose
-from pipeline.simulation.heap import build_cell, drop_heap
+from pipeline.cell.bin import build_cell
+from pipeline.simulation.heap import drop_heap
 from pipeline.simulation.views import closeup_poses
 
 SR300 = Intrinsics(416, 416, 411.7, 411.7, 207.5, 207.5)
@@ -262,9 +263,9 @@ def test_closed_loop_frames_match_tinyrenderer():
     """Every frame the hand camera takes during a closed-loop trial (3 boxes, the training-free
     planarity planner), rendered both ways: the same classification as above."""
     from pipeline.dexnet.planner import DexNetPlanner
-    from pipeline.labelling.robot_check import robot_config
-    from pipeline.picking.cell import PickCell
-    from pipeline.picking.trial import PickRunner
+    from pipeline.robot.model import robot_config
+    from pipeline.world.cell import PickCell
+    from pipeline.world.trial import PickRunner
     from pipeline.robot.model import Robot
 
     cfg = compose("evaluate", ["experiment=default", "evaluate.boxes_per_trial=3",

@@ -13,7 +13,7 @@ from pipeline.camera.geometry import camera_pose_above_bin
 from conftest import conf_section, default_config
 from pipeline.robot import (CUP_DIAMETER, CUP_OFFSET, CUP_TIP_Z, URDF_PATH, Robot, RobotConfig,
                             build_urdf_xml, rotation_angle_deg, target_camera_pose)
-from pipeline.simulation.heap import build_cell
+from pipeline.cell.bin import build_cell
 
 POS_TOL, ROT_TOL = 0.002, 1.0
 DOWN = np.array([[1.0, 0, 0], [0, -1, 0], [0, 0, -1]])  # camera axes looking straight down
@@ -249,3 +249,33 @@ def test_straight_down_grasps_over_the_bin(cell, pattern):
                 assert robot.solve_ik(T, obstacle_ids=bodies).ok, (x, y)
     # A few ms per IK + checks (measured about 1 ms); generous for slow CI machines.
     assert np.mean(times) < 0.02
+
+
+def test_many_obstacles_give_the_contacts_of_few():
+    """Above 32 obstacles ``in_collision`` takes the engine's broadphase: on 60 small boxes
+    (a 6 x 10 grid of 2 cm cubes 1 cm apart, 0.3 m under the home camera) the contacts of
+    every pose of a descent are those found by asking 30 at a time (the exact box test)."""
+    client = p.connect(p.DIRECT)
+    try:
+        bin_cfg = conf_section("bin")
+        build_cell(client, bin_cfg, conf_section("physics"))
+        robot = Robot(default_config(RobotConfig))
+        robot.load(client, ground_z=-bin_cfg.floor_thickness)
+        cubes = [_static_box(client, [-0.05 + 0.03 * i, -0.15 + 0.03 * j, 0.01],
+                             [0.01, 0.01, 0.01]) for i in range(6) for j in range(10)]
+        home = robot.home_camera_pose()
+        hits_seen = 0
+        for depth in np.linspace(0.55, 0.63, 9):
+            T = home.copy()
+            T[2, 3] = home[2, 3] - depth + 0.02  # the camera down to ~2 cm above the cubes' tops
+            res = robot.solve_ik(T, seed_q=robot.home_q())
+            many = sorted(robot.in_collision(res.q, cubes))
+            few = sorted(robot.in_collision(res.q, cubes[:30]) + robot.in_collision(
+                res.q, cubes[30:]))
+            few = sorted(c for c in few if c.other_body != robot.body_id)
+            many = sorted(c for c in many if c.other_body != robot.body_id)
+            assert many == few
+            hits_seen += len(many)
+        assert hits_seen > 0  # the descent does reach the cubes
+    finally:
+        p.disconnect(client)

@@ -164,9 +164,10 @@ def test_a_servo_that_sweeps_a_wall_is_rejected(smoke_cfg):
     and with the bin taken away the same motion passes. Turned by 90° about the normal (the cup
     line along the wall) the motion is clear."""
     from pipeline.camera.geometry import project, world_to_camera
-    from pipeline.labelling.robot_check import check_grasp, robot_config
-    from pipeline.picking.cell import PickCell
-    from pipeline.picking.trial import PickRunner, paper_x_axis
+    from pipeline.controller.grasp_check import check_grasp
+    from pipeline.robot.model import robot_config
+    from pipeline.world.cell import PickCell
+    from pipeline.world.trial import PickRunner, paper_x_axis
     from pipeline.robot.model import Robot
     from pipeline.servo.descriptor import describe_surface
 

@@ -96,8 +96,8 @@ def test_closed_loop_sensor_stream_keeps_the_heaps():
     """With sensor=sr300 the evaluation's heaps are the noise-free run's: the sensor draws
     from its own stream (seed, 41, trial), not from the heap's or the plans' generators."""
     from pipeline.evaluate import HEAP_SEED
-    from pipeline.labelling.robot_check import robot_config
-    from pipeline.picking.cell import PickCell
+    from pipeline.robot.model import robot_config
+    from pipeline.world.cell import PickCell
     from pipeline.robot.model import Robot
 
     poses = {}

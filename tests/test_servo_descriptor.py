@@ -8,6 +8,8 @@ At z = 0.5 m one pixel is 0.5 / 411.7 = 1.21 mm.
 
 from __future__ import annotations
 
+import dataclasses
+
 from pathlib import Path
 
 import numpy as np
@@ -430,7 +432,8 @@ def test_tracking_keeps_the_plane_not_only_its_orientation():
     n_down = np.array([0.0, 0.0, -1.0])
     n, c = _tracked_plane(win, seed, cfg, n_down)
     assert n == pytest.approx(n_down) and c == pytest.approx(-0.50)
-    n, c = _tracked_plane(win, seed, cfg, n_down, np.array([0.01, 0.0, 0.431]), 0.01)
+    cfg = dataclasses.replace(cfg, track_offset_m=0.01)
+    n, c = _tracked_plane(win, seed, cfg, n_down, np.array([0.01, 0.0, 0.431]))
     assert c == pytest.approx(-0.43)
-    n, c = _tracked_plane(win, seed, cfg, n_down, np.array([0.0, 0.0, 0.46]), 0.01)
+    n, c = _tracked_plane(win, seed, cfg, n_down, np.array([0.0, 0.0, 0.46]))
     assert c == pytest.approx(-0.46)

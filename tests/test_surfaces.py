@@ -22,7 +22,7 @@ from pipeline.labelling.surfaces import (
     SurfaceDetectionConfig, aggregate, detect_surfaces, match_surfaces, true_visible_faces,
 )
 from pipeline.labelling.types import Surface
-from pipeline.simulation.heap import build_cell
+from pipeline.cell.bin import build_cell
 from pipeline.simulation.scene import connect
 
 SR300 = Intrinsics(416, 416, 411.7, 411.7, 207.5, 207.5)

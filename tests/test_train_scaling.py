@@ -15,7 +15,8 @@ from pipeline.artifacts import load_manifest
 from pipeline.cli import compose
 from pipeline.dataset.scenes import SceneDataset
 from pipeline.dataset.labels import LabelSet
-from pipeline.planner.data import DepthShards, GraspDataset, Normalisation, make_loader
+from pipeline.planner.data import DepthShards, GraspDataset, make_loader
+from pipeline.planner.normalisation import Normalisation
 from pipeline.planner.distributed import DistContext, split_batch
 from pipeline.planner.data import epoch_batches
 from pipeline.train import train

@@ -429,6 +429,7 @@ class ServoSchema:
     window_tolerance_depth: float = MISSING  # m; > 0: window RANSAC tolerance ε1·min(1, Z/this)
     seed_repair: bool = MISSING  # crack and small-component repairs of the seed
     track_normal_deg: float = MISSING  # servo: stay on the surface of the previous frame's normal
+    track_offset_m: Optional[float] = MISSING  # servo: ... and within this of its plane (m)
     eps_distance: float = MISSING
     eps_normal: float = MISSING
     min_pixels: int = MISSING
@@ -474,7 +475,6 @@ class EvaluateConfig:
     retry_point_outcomes: List[str] = MISSING
     face_split_m: float = MISSING  # split the home region at other planner points this far away
     # m: the servo's tracked plane may move this far between frames; None: its normal only
-    track_offset_m: Optional[float] = MISSING
     check_hand_fit: bool = MISSING  # the run-time check tests the pattern's cups on the surface
     single_cup_fallback: bool = MISSING  # a rejected B is tried with L, then R
     min_area_ratio: float = MISSING  # 0: off (paper); 1.2: Sec. 8.4's surface-area safety check

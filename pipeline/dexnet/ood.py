@@ -37,7 +37,7 @@ from pipeline.dexnet.contact_mesh import RayScene, evaluate_contacts_mesh, robus
 from pipeline.dexnet.gqcnn import candidate_inputs
 from pipeline.dexnet.planner import crop_config, sampler_config, workspace
 from pipeline.dexnet.sampling import Candidates, point_cloud_image, sample_candidates
-from pipeline.simulation.heap import build_cell
+from pipeline.cell.bin import build_cell
 from pipeline.simulation.object_heap import ObjectHeap, drop_object_heap
 
 # An object heap's generator is seeded by (seed, OOD_SEED, split code, index): four numbers, so

@@ -4,7 +4,7 @@
 the closed loop's home image; its rows are ``pipeline.dataset.labels.LABEL_FIELDS``.
 
 Hold check (``hand.hold_check``, not in the paper): a B, L or R whose cups fit on the face is
-NG ("hold") when the closed loop's hold test (``pipeline.picking.suction.hold_test``: pull,
+NG ("hold") when the closed loop's hold test (``pipeline.world.suction.hold_test``: pull,
 shear, torsion, bending) says the cups would not carry the box's weight. The cups sit where the
 pattern puts them (L, R: one cup on the surface centre; B: the centre ± ``cup_offset`` along the
 hand's Y), the approach axis is the anti-normal, the box's mass is density × volume and its
@@ -40,13 +40,13 @@ def surface_config(cfg) -> SurfaceDetectionConfig:
 def pattern_holds(surface: Surface, hl: HandLabel, box: Box, T_world_cam: np.ndarray,
                   suction: SuctionModelConfig, cup_offset: float) -> bool:
     """Whether ``hl``'s pattern, its cups placed on ``surface`` as the pattern puts them, holds
-    ``box``'s weight by ``pipeline.picking.suction.hold_test`` (module docstring).
+    ``box``'s weight by ``pipeline.world.suction.hold_test`` (module docstring).
 
     Frames: ``surface`` and ``box.T_cam_box`` in the camera frame, ``T_world_cam`` the camera's
     pose in the world (z up); metres. ``suction``: cup radius, vacuum force, friction, gravity
     (m/s²) and the boxes' density (kg/m³).
     """
-    from pipeline.picking.suction import hold_test
+    from pipeline.world.suction import hold_test
 
     n = np.asarray(surface.normal_cam, np.float64)
     c = np.asarray(surface.center_cam, np.float64)

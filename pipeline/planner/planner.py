@@ -36,7 +36,7 @@ from pipeline.camera.depth_input import check_depth_image
 from pipeline.camera.geometry import Intrinsics, ground_distance
 from pipeline.config.build import from_section
 from pipeline.labelling.types import GraspClass
-from pipeline.planner.data import Normalisation, normalise_depth
+from pipeline.planner.normalisation import Normalisation, normalise_depth
 from pipeline.planner.decode import decode_output, second_chance
 from pipeline.planner.network import GraspNet, NetworkConfig
 from pipeline.planner.ranking import GraspCandidate, RankingConfig, rank_grasps

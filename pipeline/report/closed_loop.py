@@ -83,7 +83,7 @@ def failures_table(info: EvaluateInfo) -> Table:
     attempts on candidates of its fallback tier and their successes (``evaluate.
     dcnn_fallback_ratio``; — for the other planners and for artifacts that predate it), per
     planner."""
-    from pipeline.picking.trial import OUTCOMES, TRIAL_ENDS
+    from pipeline.world.trial import OUTCOMES, TRIAL_ENDS
 
     kinds = OUTCOMES[1:]
     headers = ["planner", *kinds, "success on another box", *(f"trials ended: {e}" for e in TRIAL_ENDS),

@@ -17,6 +17,7 @@ import numpy as np
 import pybullet as p
 
 from pipeline.camera.geometry import camera_pose_above_bin, pose_matrix, quat_from_matrix
+from pipeline.config.build import from_section
 
 
 @dataclass
@@ -31,7 +32,7 @@ class RobotConfig:
 
     The values are the ``robot`` section (``conf/robot/``), with the project's URDF
     (``urdf_builder.URDF_PATH``) given by the caller, built by
-    ``pipeline.labelling.robot_check.robot_config``.
+    :func:`robot_config`.
     """
 
     urdf_path: str  # the robot's URDF file (not a key of the ``robot`` section)
@@ -83,6 +84,9 @@ class Contact(NamedTuple):
 
 
 _REASON_RANK = {"ik": 0, "joint_limits": 1, "collision": 2}
+# Above this many obstacles, ``Robot.in_collision`` asks the engine's broadphase which bodies
+# are near each link instead of testing every body's box (same contacts, found faster).
+_BROADPHASE_MIN_OBSTACLES = 32
 # Links rigidly fixed to the camera frame: at an IK answer their pose is the target's.
 _CAMERA_RIGID = ("camera", "cup_left", "cup_right")
 
@@ -131,7 +135,7 @@ class Robot:
     def load(self, client: int, ground_z: float | None = None) -> int:
         """Add the robot (fixed base) to ``client`` and return its body id.
 
-        ``pipeline.simulation.heap.build_cell`` resets the simulation, which removes the robot:
+        ``pipeline.cell.bin.build_cell`` resets the simulation, which removes the robot:
         load it after building the cell, and again after every reset.
 
         Args:
@@ -378,16 +382,32 @@ class Robot:
         margin = self.cfg.collision_margin if margin is None else float(margin)
         self_margin = self.cfg.self_collision_margin
         # Axis-aligned boxes first: getClosestPoints only for pairs whose boxes (grown by the
-        # margin) overlap. This cuts the check from ~0.2 ms to a few hundredths.
+        # margin) overlap. This cuts the check from ~0.2 ms to a few hundredths. With many
+        # obstacles (a heap model of hundreds of columns, pipeline.controller.heap_model) the
+        # engine's own broadphase names the bodies near each link; its boxes are the bodies'
+        # grown by the contact threshold, so it passes every pair the exact test passes.
         boxes = {j: p.getAABB(rid, j, physicsClientId=cid) for j in self._links}
-        ignore = set(ignore_body_ids)
+        ignore = set(ignore_body_ids) | {rid}
         found: list[Contact] = []
-        for body in obstacle_body_ids:
-            if body in ignore or body == rid:
-                continue
-            other = p.getAABB(body, physicsClientId=cid)
+        wanted = [b for b in dict.fromkeys(obstacle_body_ids) if b not in ignore]
+        near_link = None
+        if len(wanted) > _BROADPHASE_MIN_OBSTACLES:
+            pool = set(wanted)
+            near_link = {}
             for link in self._links:
-                if link == -1 or not _overlap(boxes[link], other, margin):
+                lo, hi = boxes[link]
+                hits = p.getOverlappingObjects([v - margin for v in lo], [v + margin for v in hi],
+                                               physicsClientId=cid) or ()
+                near_link[link] = {b for b, _ in hits if b in pool}
+        for body in wanted:
+            other = None if near_link is not None else p.getAABB(body, physicsClientId=cid)
+            for link in self._links:
+                if link == -1:
+                    continue
+                if near_link is not None:
+                    if body not in near_link[link]:
+                        continue
+                elif not _overlap(boxes[link], other, margin):
                     continue
                 if p.getClosestPoints(rid, body, margin, linkIndexA=link, physicsClientId=cid):
                     found.append(Contact(self.link_name[link], body))
@@ -430,3 +450,22 @@ class Robot:
                     f"self-contacts {hits}; move RobotConfig.base_position")
             self._home_q = q.copy()
         return self._home_q.copy()
+
+
+def robot_config(cfg) -> RobotConfig:
+    """The ``RobotConfig`` of a composed config (``cfg.robot``; the URDF is the project's).
+
+    Raises ValueError when ``cfg.hand``'s cups differ from the URDF's: the robot model (what
+    the checks and the simulated hand use) and the hand config must describe one hand.
+    """
+    from pipeline.robot import urdf_builder
+
+    built = (urdf_builder.CUP_DIAMETER, urdf_builder.CUP_OFFSET)
+    if not np.allclose(built, (cfg.hand.cup_diameter, cfg.hand.cup_offset)):
+        raise ValueError(
+            f"hand config (cup_diameter={cfg.hand.cup_diameter}, cup_offset="
+            f"{cfg.hand.cup_offset}) differs from the robot URDF's cups {built}: change "
+            "pipeline/robot/urdf_builder.py to match and run `python -m "
+            "pipeline.robot.urdf_builder`, or keep conf/hand/two_cup.yaml as it is")
+    return from_section(RobotConfig, cfg.robot, urdf_path=str(urdf_builder.URDF_PATH),
+                        base_position=tuple(cfg.robot.base_position))

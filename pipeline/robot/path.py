@@ -18,17 +18,24 @@ from typing import Optional, Sequence
 
 import numpy as np
 
+from pipeline.config.build import from_section
+
 
 @dataclass(frozen=True)
 class PathCheckConfig:
     """How finely a motion is sampled and how far it keeps from the bin: ``robot.path``, built
-    by ``pipeline.labelling.robot_check.path_config``."""
+    by :func:`path_config`."""
 
     step_m: float  # largest camera translation between samples, metres
     step_deg: float  # largest camera rotation between samples, degrees
     # extra clearance from the padded bodies (the bin), on top of robot.collision_margin, for
     # a servo that strays from the predicted path (evaluate records how far, per attempt)
     bin_clearance: float
+
+
+def path_config(cfg) -> PathCheckConfig | None:
+    """The path check's settings, ``cfg.robot.path`` (None when ``robot.path_check`` is off)."""
+    return from_section(PathCheckConfig, cfg.robot.path) if bool(cfg.robot.path_check) else None
 
 
 @dataclass

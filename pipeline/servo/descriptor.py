@@ -159,6 +159,10 @@ class DescriptorConfig:
             takes that orientation (``_tracked_plane``), and a surface found farther than this
             angle from it is "surface_changed" (0 = off, the paper: the plane at the seed,
             whatever it is).
+        track_offset_m: with an expected normal and an expected point
+            (``describe_surface(expected_point_cam=)``, a point of the tracked surface carried
+            into this frame), only window slabs within this distance (m) of the tracked plane
+            compete (``_tracked_plane``; None = the normal only).
     """
 
     window: int
@@ -174,6 +178,7 @@ class DescriptorConfig:
     window_tolerance_depth: float  # m; > 0: window RANSAC tolerance ε1·min(1, Z/this)
     seed_repair: bool
     track_normal_deg: float  # > 0: stay on the surface whose normal is expected
+    track_offset_m: float | None  # m; with an expected point: stay on the tracked plane too
 
 
 def descriptor_config(cfg) -> DescriptorConfig:
@@ -276,8 +281,7 @@ def _rules(X: np.ndarray, Y: np.ndarray, Z: np.ndarray, valid: np.ndarray, xn: n
 
 def _window_plane(win: np.ndarray, seed_point: np.ndarray, cfg: DescriptorConfig,
                   expected: np.ndarray | None = None,
-                  expected_point: np.ndarray | None = None,
-                  offset_tolerance: float | None = None) -> tuple[np.ndarray, float]:
+                  expected_point: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """Eq. 11: the plane (n̂ towards the camera, c = n̂ · P) of the (N, 3) window points, N ≥ 10.
 
     With ``cfg.window_hypotheses`` > 0 the points are first restricted to the seed's surface
@@ -288,10 +292,10 @@ def _window_plane(win: np.ndarray, seed_point: np.ndarray, cfg: DescriptorConfig
     least-squares refits on the points within ε1. With ``cfg.window_tolerance_depth`` the
     hypotheses' tolerance shrinks with the seed's depth (see ``DescriptorConfig``). With an
     ``expected`` unit normal (3,) and ``cfg.track_normal_deg``: :func:`_tracked_plane` (with
-    ``expected_point`` and ``offset_tolerance``, if given).
+    ``expected_point``, if given).
     """
     if expected is not None and cfg.track_normal_deg > 0:
-        return _tracked_plane(win, seed_point, cfg, expected, expected_point, offset_tolerance)
+        return _tracked_plane(win, seed_point, cfg, expected, expected_point)
     used = np.ones(len(win), dtype=bool)
     if cfg.window_hypotheses > 0:
         rng = np.random.default_rng(0)
@@ -334,8 +338,8 @@ def _hypothesis_tolerance(seed_point: np.ndarray, cfg: DescriptorConfig) -> floa
 
 
 def _tracked_plane(win: np.ndarray, seed_point: np.ndarray, cfg: DescriptorConfig,
-                   expected: np.ndarray, expected_point: np.ndarray | None = None,
-                   offset_tolerance: float | None = None) -> tuple[np.ndarray, float]:
+                   expected: np.ndarray, expected_point: np.ndarray | None = None
+                   ) -> tuple[np.ndarray, float]:
     """The window plane while tracking a surface of known normal ``expected`` (3,, unit): the
     plane of that normal through the window point that most window points lie within the
     hypotheses' tolerance of (the largest slab of the tracked orientation), its offset the mean
@@ -345,7 +349,7 @@ def _tracked_plane(win: np.ndarray, seed_point: np.ndarray, cfg: DescriptorConfi
     (``cfg.refine``), so the surface's normal is measured afresh in every frame.
 
     With ``expected_point`` (3,), a point of the tracked surface carried into this frame, and
-    ``offset_tolerance`` (m): only the slabs within that distance of the tracked plane count.
+    ``cfg.track_offset_m`` set: only the slabs within that distance of the tracked plane count.
     Parallel planes share the normal: the top of a cube and the bin floor 7 cm below it both
     face the camera, and a window mostly on the floor made the servo follow the floor. When no
     window point is that near, the plane is the tracked one (the region grows from it, or
@@ -355,9 +359,9 @@ def _tracked_plane(win: np.ndarray, seed_point: np.ndarray, cfg: DescriptorConfi
     tol = _hypothesis_tolerance(seed_point, cfg)
     d = win @ n
     counts = (np.abs(d[None, :] - d[:, None]) < tol).sum(axis=1)  # (N,) per candidate offset
-    if expected_point is not None and offset_tolerance is not None:
+    if expected_point is not None and cfg.track_offset_m is not None:
         tracked = float(n @ np.asarray(expected_point, np.float64))
-        near = np.abs(d - tracked) < offset_tolerance
+        near = np.abs(d - tracked) < float(cfg.track_offset_m)
         if not near.any():
             return n, tracked
         counts = np.where(near, counts, -1)
@@ -378,7 +382,6 @@ def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
                      expected_normal_cam: np.ndarray | None = None,
                      sites_cam: np.ndarray | None = None,
                      expected_point_cam: np.ndarray | None = None,
-                     offset_tolerance: float | None = None,
                      ) -> tuple[SurfaceFeatures | None, str]:
     """Surface features of the planar surface at ``seed_uv`` (paper Sec. 5.1; see the module
     docstring for the algorithm).
@@ -397,9 +400,9 @@ def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
             pixels nearer to the first site than to every other, before the plane and the
             rectangle are fitted. The closed loop passes the planner's points of other faces
             that lie in the region, where coplanar faces of two boxes grew into one region.
-        expected_point_cam, offset_tolerance: (3,) optional, a point of the tracked surface in
-            this camera frame, metres, and how far (m) the surface's plane may be from it along
-            the expected normal (not the paper; with ``expected_normal_cam``: ``_tracked_plane``).
+        expected_point_cam: (3,) optional, a point of the tracked surface in this camera frame,
+            metres; the surface's plane may be at most ``cfg.track_offset_m`` from it along the
+            expected normal (not the paper; with ``expected_normal_cam``: ``_tracked_plane``).
 
     Returns:
         (features, "") when a surface is found, else (None, reason) with reason one of
@@ -476,8 +479,7 @@ def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
     if expected_normal_cam is not None and cfg.track_normal_deg > 0:
         expected = np.asarray(expected_normal_cam, np.float64)
         expected = expected / np.linalg.norm(expected)
-    n_hat, c_hat = _window_plane(win, seed_point, cfg, expected, expected_point_cam,
-                                 offset_tolerance)
+    n_hat, c_hat = _window_plane(win, seed_point, cfg, expected, expected_point_cam)
     d_hat = -c_hat  # n̂ · P + D̂ = 0 with n̂ towards the camera
 
     # (2)–(3) Eqs. 12–14, on the crop that can hold the region: the region is one connected

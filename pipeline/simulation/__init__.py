@@ -3,7 +3,6 @@
 from pipeline.simulation.heap import (  # noqa: F401
     BoxPose,
     HeapResult,
-    build_cell,
     drop_heap,
     settle,
 )

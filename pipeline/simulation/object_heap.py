@@ -3,9 +3,9 @@
 The out-of-domain training set of the Dex-Net-style baseline (docs/baseline.md) is heaps of the
 random convex objects of ``pipeline.simulation.objects`` (cylinders, prisms, convex hulls) in
 the same bin, dropped, settled and cleaned up exactly as ``pipeline.simulation.heap`` does it for
-boxes: the same cell (``heap.build_cell``), drop height, drop cadence, margin from the walls,
-rest criterion (``heap.settle``, watching the corners of each object's bounding box in its own
-frame) and removal of objects that came to rest outside the bin.
+boxes: the same cell (``pipeline.cell.bin.build_cell``), drop height, drop cadence, margin
+from the walls, rest criterion (``heap.settle``, watching the corners of each object's bounding
+box in its own frame) and removal of objects that came to rest outside the bin.
 
 World frame: z up, origin at the centre of the bin floor's top surface; metres, seconds
 (``pipeline.simulation.heap``).
@@ -63,7 +63,7 @@ def drop_object_heap(client: int, rng: np.random.Generator, objects_cfg, bin_cfg
 
     ``objects_cfg``: the ``objects`` section (``conf/objects/``: the shape spec, ``min_count``,
     ``max_count``, ``density``, ``lateral_friction``); the cell must have been built
-    (``heap.build_cell``). Random draws, in this order: the count, then per object its shape
+    (``pipeline.cell.bin.build_cell``). Random draws, in this order: the count, then per object its shape
     (``objects.sample_object``), x, y and orientation.
     """
     spec = object_spec(objects_cfg)

@@ -10,7 +10,8 @@ import pybullet as p
 from pipeline.camera.geometry import Intrinsics, camera_pose_above_bin, pose_matrix
 from pipeline.camera.render import render_depth
 from pipeline.camera.sensor import apply_sensor_model
-from pipeline.simulation.heap import BoxPose, build_cell, drop_heap
+from pipeline.cell.bin import build_cell
+from pipeline.simulation.heap import BoxPose, drop_heap
 
 
 @dataclass

@@ -1,4 +1,4 @@
-"""Suction in pybullet (pipeline.picking.suction): seal test, hold test, the vacuum constraint.
+"""Suction in pybullet (pipeline.world.suction): seal test, hold test, the vacuum constraint.
 
 World (pybullet DIRECT, gravity −9.81 m/s² along world z): a static ground slab with its top at
 z = 0 and the robot at its home pose (camera 0.625 m above the origin, looking straight down).
@@ -25,7 +25,7 @@ import pytest
 from conftest import default_config
 from pipeline.camera.geometry import Intrinsics
 from pipeline.dexnet.contact import REASONS, SuctionModelConfig, evaluate_contacts
-from pipeline.picking import SuctionGripper, hold_test, seal_test
+from pipeline.world.suction import SuctionGripper, hold_test, seal_test
 from pipeline.robot import CUP_OFFSET, Robot, RobotConfig
 
 CFG = default_config(SuctionModelConfig)

@@ -6,7 +6,7 @@ dropped into the bin. World frame: z up, origin at the centre of the bin floor's
 metres, kilograms, seconds. Camera frame: OpenCV (x right, y down, z forward).
 
 The robot is position-controlled: its joints are set every control step (``Robot.set_joints``)
-and the boxes follow the physics. A held box hangs on a constraint (``pipeline.picking.suction``).
+and the boxes follow the physics. A held box hangs on a constraint (``pipeline.world.suction``).
 The camera renders only the bin and the boxes (a real hand's cups are outside the camera's view
 of the surface): the ray-cast renderer is given just those bodies; for pybullet's rasteriser
 the robot is moved out of the way for the duration of a render.
@@ -23,7 +23,8 @@ from pipeline.camera.geometry import Intrinsics
 from pipeline.camera.depth_filter import preprocess_depth
 from pipeline.camera.render import render_depth
 from pipeline.camera.sensor import apply_sensor_model
-from pipeline.simulation.heap import build_cell, drop_heap, settle
+from pipeline.cell.bin import build_cell
+from pipeline.simulation.heap import drop_heap, settle
 
 _PARKED = [0.0, 0.0, -50.0]  # where the robot waits while the camera renders
 

@@ -17,7 +17,7 @@ import numpy as np
 from pipeline.camera.geometry import Intrinsics, pose_matrix
 from pipeline.dataset.scenes import Box, Scene
 from pipeline.labelling.types import GraspClass
-from pipeline.picking.cell import Frame, PickCell
+from pipeline.world.cell import Frame, PickCell
 from pipeline.planner.decode import GraspPrediction
 from pipeline.planner.ranking import GraspCandidate, rank_grasps
 

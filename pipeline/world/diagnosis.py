@@ -14,12 +14,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.picking.cell import Frame, PickCell
+from pipeline.world.cell import Frame, PickCell
 
 
 def labels_at_no_grasp(runner, frame: Frame, failed: list[dict]) -> dict:
     """For a ``PickRunner``'s "no grasp" end: the labelling stage's graspable points on the
-    same home ``frame`` (the oracle's candidates, ``pipeline.picking.oracle``, after the area
+    same home ``frame`` (the oracle's candidates, ``pipeline.world.oracle``, after the area
     check ``runner.large_enough``) and whether one of them passes the same selection
     (``runner.select``: the run-time check with the trial's retry memory ``failed``).
 
@@ -29,7 +29,7 @@ def labels_at_no_grasp(runner, frame: Frame, failed: list[dict]) -> dict:
     once per runner (``runner.oracle``); the wall times the check adds to ``runner.timings`` are
     dropped."""
     if runner.oracle is None:
-        from pipeline.picking.oracle import OraclePlanner
+        from pipeline.world.oracle import OraclePlanner
 
         runner.oracle = OraclePlanner(runner.cfg, runner.cell)
     lengths = {k: len(v) for k, v in runner.timings.items()}

@@ -23,7 +23,7 @@ One **attempt** (``PickRunner.attempt``):
    surface normal and axes), not the surface centre: Dex-Net does not refine its point.
 3. **Approach** along the camera axis from d* until the lips touch and press
    (``motion.press_depth``); **suction**: the seal test and the hold test of the active cups
-   (``pipeline.picking.suction``); **lift** ``motion.lift_height`` with the box hanging on its
+   (``pipeline.world.suction``); **lift** ``motion.lift_height`` with the box hanging on its
    constraint; **place**: a point-to-point move to the conveyor pose, release, and back home.
 
 Outcomes of an attempt: ``success``, or the failure ``no_seal``, ``dropped`` (sealed but the
@@ -55,8 +55,8 @@ import numpy as np
 import pybullet as p
 
 from pipeline.camera.geometry import Intrinsics, backproject_pixels, world_to_camera
-from pipeline.picking.cell import Frame, PickCell
-from pipeline.picking.diagnosis import final_home_record, labels_at_no_grasp
+from pipeline.world.cell import Frame, PickCell
+from pipeline.world.diagnosis import final_home_record, labels_at_no_grasp
 
 OUTCOMES = ("success", "no_seal", "dropped", "collision", "joint_limits", "timeout",
             "lost_target")
@@ -113,10 +113,10 @@ class TrialResult:
     # pairs per reason (the robot check's NG reason, "descriptor" when it found no surface,
     # "repeat" for a retry of a failed plan); with evaluate.label_no_grasp, for a planner
     # other than the oracle, ``label_candidates`` and ``label_executable``
-    # (``pipeline.picking.diagnosis.labels_at_no_grasp``). Empty for other ends.
+    # (``pipeline.world.diagnosis.labels_at_no_grasp``). Empty for other ends.
     no_grasp: dict = field(default_factory=dict)
     # end "no_grasp" of a trial with a kept trace: the home image the planner found nothing on,
-    # for the logs (``pipeline.picking.diagnosis.final_home_record``); else empty.
+    # for the logs (``pipeline.world.diagnosis.final_home_record``); else empty.
     final_home: dict = field(default_factory=dict)
 
     @property
@@ -177,19 +177,6 @@ def pattern_fits(feats, pattern: str, hand_cfg) -> bool:
         and feats.area >= float(hand_cfg.min_area_ratio) * cups * cup_area
 
 
-def _with_bin_clearance(cfg, clearance: float):
-    """A copy of ``cfg`` whose ``robot.path.bin_clearance`` is ``clearance`` (m)."""
-    import copy
-
-    from omegaconf import DictConfig, OmegaConf
-
-    out = copy.deepcopy(cfg)
-    if isinstance(out, DictConfig):
-        OmegaConf.set_readonly(out, False)
-    out.robot.path.bin_clearance = float(clearance)
-    return out
-
-
 def move_time(dq: np.ndarray, max_speed: float, max_accel: float) -> float:
     """Duration (s) of a synchronised point-to-point move: the slowest joint's trapezoidal
     (or triangular, for short moves) profile at ``max_speed`` (rad/s) and ``max_accel``."""
@@ -209,7 +196,7 @@ class PickRunner:
     """
 
     def __init__(self, cfg, cell: PickCell, planner, planner_name: str) -> None:
-        from pipeline.picking.suction import SuctionGripper
+        from pipeline.world.suction import SuctionGripper
         from pipeline.dexnet.contact import suction_model_config
         from pipeline.servo.control import servo_config
         from pipeline.servo.descriptor import descriptor_config
@@ -223,9 +210,9 @@ class PickRunner:
                                                       float(cfg.hand.cup_offset))
         self._place_q: np.ndarray | None = None
         pref = cfg.evaluate.preferred_bin_clearance
-        # the config of the run-time check's first pass (``_check``), None: no first pass
-        self._comfort_cfg = None if pref is None or not bool(cfg.robot.path_check) \
-            else _with_bin_clearance(cfg, max(float(pref), float(cfg.robot.path.bin_clearance)))
+        # the bin clearance of the run-time check's first pass (``_check``), None: no first pass
+        self._comfort = None if pref is None or not bool(cfg.robot.path_check) \
+            else max(float(pref), float(cfg.robot.path.bin_clearance))
         self.oracle = None  # the labels' planner of ``diagnosis.labels_at_no_grasp``, when needed
         # wall time of the parts of a control step (seconds, one entry per call)
         self.timings: dict[str, list[float]] = {
@@ -462,7 +449,7 @@ class PickRunner:
         no surface at the point, or, with ``evaluate.check_hand_fit``, "hand_fit" when the
         pattern's cups do not fit on that surface (``pattern_fits``; DCNN and oracle
         candidates)."""
-        from pipeline.labelling.robot_check import check_grasp
+        from pipeline.controller.grasp_check import check_grasp
 
         feats, sites = self._home_surface(frame, cand, cands)
         if feats is None:
@@ -474,14 +461,13 @@ class PickRunner:
         # centre of the surface the descriptor finds at the candidate (what the servo tracks)
         fixed = self._fixed_point(cand)
         centre = feats.center_cam if fixed is None else fixed
-        for cfg in (self._comfort_cfg, self.cfg):
-            if cfg is None:
-                continue
-            check = check_grasp(self.cell.robot, cfg, self.cfg.hand, frame.T_world_cam, centre,
+        for clearance in ([self._comfort] if self._comfort is not None else []) + [None]:
+            check = check_grasp(self.cell.robot, self.cfg, self.cfg.hand, frame.T_world_cam,
+                                centre,
                                 feats.normal_cam, feats.long_axis_cam, feats.short_axis_cam,
                                 paper_x_axis(feats), pattern, self.cell.intrinsics,
                                 self.cell.obstacles, [target] if target >= 0 else [],
-                                self.cell.cell_ids[1:])
+                                self.cell.cell_ids[1:], bin_clearance=clearance)
             if check.reason is None:
                 return check, None, sites
         return None, str(check.reason), None
@@ -603,8 +589,6 @@ class PickRunner:
         seed = np.array([cand.u, cand.v], np.float64)
         normal_world = None  # the tracked surface's normal (world), from the previous frame
         g_world = None  # and its centre g′ (world)
-        track_offset = cfg.evaluate.track_offset_m
-        track_offset = None if track_offset is None else float(track_offset)
         limit_hits = 0
         steps_max = int(math.ceil(float(cfg.servo.timeout_s) / self.dt))
         converged = False
@@ -617,14 +601,13 @@ class PickRunner:
             # the tracked surface's normal, carried into this frame by the camera's motion
             expected = None if normal_world is None else frame.T_world_cam[:3, :3].T @ normal_world
             # and a point of it (the previous g′): the plane itself, not only its orientation
-            on_plane = None if g_world is None or track_offset is None else \
+            on_plane = None if g_world is None else \
                 world_to_camera(g_world[None], frame.T_world_cam)[0]
             feats, reason = describe_surface(frame.depth_m, intr, seed, self.descriptor_cfg,
                                              expected_normal_cam=expected,
                                              sites_cam=None if sites_world is None else
                                              world_to_camera(sites_world, frame.T_world_cam),
-                                             expected_point_cam=on_plane,
-                                             offset_tolerance=track_offset)
+                                             expected_point_cam=on_plane)
             self.timings["descriptor_s"].append(time.perf_counter() - td)
             if feats is None:
                 att.outcome, att.lost_reason = "lost_target", str(reason)
