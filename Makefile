@@ -11,7 +11,7 @@ RUN := $(PY) -m
 # NPROC > 1: data-parallel training, one process per CPU share or GPU (torchrun + DDP).
 TRAIN := $(if $(filter-out 1,$(NPROC)),.venv/bin/torchrun --standalone --nproc_per_node=$(NPROC) -m,$(RUN)) pipeline.train
 
-.PHONY: help setup test test-slow reproduce generate label train baseline evaluate unseen ablation robustness report verify view bench repro-check lock clean
+.PHONY: help setup lint test test-slow reproduce generate label train baseline evaluate unseen ablation robustness report verify view bench repro-check lock clean
 
 help: ## List the targets
 	@grep -hE '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  make %-12s %s\n", $$1, $$2}'
@@ -20,7 +20,10 @@ help: ## List the targets
 setup: ## Create .venv with the pinned packages and check system libraries (quick if done)
 	@bash scripts/setup.sh
 
-test: setup ## Run the fast test suite (what CI runs)
+lint: setup ## Check the architecture contracts (import-linter: the robot side never imports the world)
+	.venv/bin/lint-imports --no-cache
+
+test: setup ## Run the fast test suite (what CI runs; the contracts are one of its tests)
 	$(PY) -m pytest -q
 
 test-slow: setup ## Run only the tests marked slow (`make test` runs all the others; CI runs both)

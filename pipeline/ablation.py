@@ -4,9 +4,10 @@
 
 Each variant of ``ablation.variants`` (``conf/stage/ablation.yaml``) is one run of the evaluation
 stage with the variant's overrides, for each planner of ``ablation.planners`` and
-``ablation.trials`` trials, on the evaluation's own heaps (they depend only on ``seed`` and the
-trial index). Every run is an evaluation artifact of its own (reused when its version exists);
-this stage gathers their Table 3 rows:
+``ablation.trials`` trials, on the ``dev`` heaps (the ablation is development; the report's
+Table 3 is measured on ``test``, which nothing is chosen on; the heaps depend only on ``seed``,
+the split and the trial index). Every run is an evaluation artifact of its own (reused when its
+version exists); this stage gathers their Table 3 rows:
 
     ablation.csv    planner, variant, overrides, success rate, attempts, successes, boxes picked,
                     PPH (motion), failure counts, trial ends, the evaluation's version
@@ -15,8 +16,8 @@ this stage gathers their Table 3 rows:
 The oracle planner (the labels computed on the home image) and the DCNN are the default. The
 oracle's labels and run-time check follow the same switches, so its rows isolate what an
 extension does to execution. For the DCNN the network is the one trained on the default labels;
-a variant changes only its run-time execution. The evaluation stage's ``latest`` is put back afterwards, so that it
-still names the ``make reproduce`` evaluation.
+a variant changes only its run-time execution. The evaluation stage's ``latest`` is put back
+afterwards, so that it still names the ``make reproduce`` evaluation.
 """
 
 from __future__ import annotations
@@ -39,8 +40,10 @@ from pipeline.tracking import StageLog
 STAGE = "ablation"
 SECTIONS = ("seed", "ablation")
 NOT_AFFECTING_RESULT = ("ablation.force",)
-ROW_KEYS = ("success_rate", "attempts", "successes", "picked", "boxes", "pph_motion",
-            "path_deviation_mm_median", "path_deviation_mm_max")
+SPLIT = "dev"  # the ablation chooses between execution variants: never on the test heaps
+ROW_KEYS = ("success_rate", "success_ci_low", "success_ci_high", "attempts", "successes",
+            "picked", "boxes", "picked_rate", "picked_ci_low", "picked_ci_high", "pph_motion",
+            "path_deviation_mm_median", "path_deviation_mm_max", "no_attempt_reason")
 
 
 def _finite(value):
@@ -60,7 +63,7 @@ def run_variants(cfg: DictConfig, base: list[str]) -> list[dict]:
             for v in ab.variants:
                 overrides = [str(o) for o in v.overrides]
                 extra = [f"planner={planner}", f"evaluate.num_trials={int(ab.trials)}",
-                         *overrides]
+                         f"evaluate.split={SPLIT}", *overrides]
                 print(f"[{STAGE}] {planner} / {v.name}: evaluate {' '.join(base + extra)}",
                       flush=True)
                 out = Path(evaluate(compose("evaluate", base + extra)))

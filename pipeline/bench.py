@@ -540,27 +540,24 @@ def closed_loop_figures(cfg_name: str = "evaluate", renderer: str | None = None,
     import torch
 
     from pipeline.cli import compose
-    from pipeline.dexnet.planner import DexNetPlanner
-    from pipeline.robot.model import robot_config
-    from pipeline.world.cell import PickCell
-    from pipeline.world.trial import PickRunner
-    from pipeline.robot.model import Robot
+    from pipeline.controller.planning import DexNetStylePlanner
     from pipeline.servo.descriptor import describe_surface
+    from pipeline.world.trial import make_runner
 
     torch.set_num_threads(1)
     extra = [f"camera.renderer={renderer}"] if renderer else []
     cfg = compose(cfg_name, ["experiment=default", f"evaluate.boxes_per_trial={boxes}",
                              "evaluate.dexnet_variant=planarity", *extra])
-    cell = PickCell(cfg, lambda: Robot(robot_config(cfg)))
-    dex = DexNetPlanner.from_config(cfg, "planarity", cell.robot.home_camera_pose())
-    runner = PickRunner(cfg, cell, lambda d, i, rng: dex.plan(d, i, rng=rng), "dexnet")
+    runner = make_runner(cfg, "dexnet", lambda cell: DexNetStylePlanner(
+        cfg, "planarity", cell.robot.home_camera_pose(), None))
+    cell = runner.cell
     out: dict[str, float] = {}
     if descriptor:
         cell.reset(np.random.default_rng([BENCH_SEED, 31, 0]), boxes)
         frame = cell.render()
         ys, xs = np.nonzero(np.isin(frame.body_ids, list(cell.boxes)))
         seed = np.array([xs[len(xs) // 2], ys[len(ys) // 2]], np.float64)
-        dcfg = runner.descriptor_cfg  # conf/servo/, as the closed loop uses it
+        dcfg = runner.robot_side.descriptor_cfg  # conf/servo/, as the closed loop uses it
         times = []
         for _ in range(20):
             t0 = time.perf_counter()
@@ -573,14 +570,15 @@ def closed_loop_figures(cfg_name: str = "evaluate", renderer: str | None = None,
                               np.random.default_rng([BENCH_SEED, 37, 0]))
     wall = time.perf_counter() - t0
     cell.close()
-    tm = runner.timings
+    runner.robot_side.close()
+    tm = {**runner.timings, **runner.robot_side.timings}
     sfx = f"_{renderer}" if renderer else ""
     steps = tm["control_step_s"]
     out[f"control_loop_hz{sfx}"] = 1.0 / float(np.median(steps)) if steps else float("nan")
     out[f"sim_s_per_wall_s{sfx}"] = result.sim_s / wall
     out[f"trial_{boxes}_boxes_wall_s{sfx}"] = wall
-    parts = {"render": "render_s", "descriptor": "descriptor_s", "control law": "control_law_s",
-             "Jacobian + joint update": "jacobian_s", "physics": "physics_s",
+    parts = {"render": "render_s", "descriptor": "descriptor_s",
+             "control law + Jacobian + joint update": "control_law_s", "physics": "physics_s",
              "collision check": "collision_s"}
     ms = {k: 1000 * float(np.median(tm[v])) if tm[v] else 0.0 for k, v in parts.items()}
     for k, v in parts.items():

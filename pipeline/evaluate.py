@@ -5,17 +5,23 @@
 For every planner in ``evaluate.planners`` (``dcnn``: the training artifact
 ``evaluate.train_version``; ``dexnet``: the baseline artifact ``evaluate.baseline_version``,
 variant ``evaluate.dexnet_variant``; ``dexnet_ood``: the same artifact's GQ-CNN trained on
-non-box objects, variant ``gqcnn_ood``; ``oracle``: the labels on the home image) and every trial, the same heap (seed (seed, 31, trial)) of
+non-box objects, variant ``gqcnn_ood``; ``oracle``: the labels on the home image; any other
+entry: a user's plug-in planner, ``package.module:Class`` or an entry point name,
+``pipeline.controller.planning``) and every trial, the same heap of
 ``evaluate.boxes_per_trial`` boxes of ``eval_boxes`` is dropped into the bin and the robot
-picks until the trial ends (``pipeline.world.trial``). Trials run in parallel processes; the
-artifact does not depend on the number of workers.
+picks until the trial ends (``pipeline.world.trial``). The heaps come from the stream of
+``evaluate.split``: ``dev`` (development, the ablation) or ``test`` (the report's Table 3;
+never used to choose anything); trial t of split s has the heap seed (seed, HEAP_SEEDS[s], t).
+Trials run in parallel processes; the artifact does not depend on the number of workers.
 
-Every depth image the robot takes (at home and in every servo step) goes through the ``sensor``
-model (default ``ideal``: none; ``sensor=sr300``: noise, holes and quantisation, drawn from a
-stream of its own, seed (seed, 41, trial), so the heaps and the plans' draws are those of the
-noise-free run) and then the ``depth_filter`` preprocessing (default ``none``). With noisy
-depth set ``servo.normal_smoothing`` (the descriptor's per-pixel normals need it; see
-``pipeline.servo.descriptor``).
+The robot decides from its observations alone (``pipeline.controller``): every depth image it
+takes (at home and in every servo step) goes through the ``sensor`` model (default ``ideal``:
+none; ``sensor=sr300``: noise, holes and quantisation, drawn from a stream of its own, so the
+heaps and the plans' draws are those of the noise-free run), and the robot side applies the
+``depth_filter`` preprocessing (default ``none``). With noisy depth set
+``servo.normal_smoothing`` (the descriptor's per-pixel normals need it; see
+``pipeline.servo.descriptor``). ``evaluate.collision_model=truth`` gives the robot's run-time
+check the heap's true boxes instead (simulator knowledge: an ablation row, never a headline).
 
 Artifact (``data/evaluate/<version>/``)::
 
@@ -50,12 +56,16 @@ from pipeline.artifacts.csvfile import write_rows
 from pipeline.artifacts.store import StageRun
 from pipeline.camera.render import check_renderer
 from pipeline.cli import CONF_DIR, data_root, stage_main
+from pipeline.controller.check import COLLISION_MODELS
+from pipeline.controller.planning import BUILT_IN, load_plugin, plugin_target
+from pipeline.controller.retry import RETRY_POLICIES
 from pipeline.executor import map_shards, resolve_workers
-from pipeline.world.trial import (
-    OUTCOMES, RETRY_POLICIES, TRIAL_ENDS, PickRunner, TrialResult,
-)
 from pipeline.robot.approach import check_approach
 from pipeline.tracking import StageLog
+from pipeline.world.books import convergence_rows, summarise
+from pipeline.world.trial import (
+    HEAP_STREAMS, OUTCOMES, TrialResult, TrialRunner, make_runner,
+)
 
 STAGE = "evaluate"
 # train.ranking: the oracle ranks with it (the DCNN with its model's, part of the train version)
@@ -64,7 +74,7 @@ SECTIONS = ("seed", "camera", "sensor", "depth_filter", "bin", "physics", "hand"
 NOT_AFFECTING_RESULT = ("evaluate.train_version", "evaluate.baseline_version",
                         "evaluate.workers", "evaluate.force", "evaluate.log_trials",
                         "evaluate.num_threads")
-PLANNERS = ("dcnn", "dexnet", "dexnet_ood", "oracle")
+PLANNERS = BUILT_IN  # and plug-ins (pipeline.controller.planning)
 # The Dex-Net-style planners: the baseline variant each drives the robot with (None: the one
 # ``evaluate.dexnet_variant`` names). ``dexnet_ood``: the GQ-CNN trained on non-box objects.
 DEXNET_PLANNERS = {"dexnet": None, "dexnet_ood": "gqcnn_ood"}
@@ -74,7 +84,6 @@ def dexnet_variant(cfg, name: str) -> str:
     """The baseline variant (``pipeline.dexnet.planner.BASELINE_VARIANTS``) of Dex-Net-style
     planner ``name``."""
     return DEXNET_PLANNERS[name] or str(cfg.evaluate.dexnet_variant)
-HEAP_SEED, PLAN_SEED, SENSOR_SEED = 31, 37, 41
 PAPER_TABLE3 = [  # paper Table 3, as reported
     {"system": "Dex-Net 3.0", "hand": "suction (1 cup)", "success": 98.0, "planning_s": 3.0,
      "pph": None},
@@ -109,106 +118,48 @@ def _init_worker(cfg_obj, train_dir: str | None, baseline_dir: str | None) -> No
 
 def make_planner(cfg, name: str, train_dir: str | None, baseline_dir: str | None, T_home,
                  cell=None):
-    """``plan(depth_m, intrinsics, rng)`` for planner ``name`` (``oracle``: also ``frame=``; it
-    reads the ``cell``'s true box poses, ``pipeline.world.oracle``)."""
+    """The ``plan(observation, rng)`` planner (``pipeline.controller.planning``) called
+    ``name``: a built-in one, or a plug-in. ``oracle`` reads the world ``cell``'s truth
+    (``pipeline.world.oracle``)."""
+    from pipeline.controller.planning import DCNNPlanner, DexNetStylePlanner
+
     if name == "dcnn":
-        from pipeline.planner.planner import Planner, fallback_threshold, ranking_config
-
-        net = Planner.load(train_dir, device="cpu")
-        th = cfg.evaluate.dcnn_threshold
-        # the composed train.ranking (policy included), with the model's th unless overridden
-        net.ranking = ranking_config(cfg, net.ranking.threshold if th is None else float(th))
-        floor = fallback_threshold(cfg, net.ranking.threshold)  # the second tier's
-        return lambda depth, intr, rng: net.plan(depth, intr, fallback_threshold=floor)
+        return DCNNPlanner(cfg, train_dir)
     if name in DEXNET_PLANNERS:
-        from pipeline.dexnet.planner import DexNetPlanner
-
-        dex = DexNetPlanner.for_variant(cfg, dexnet_variant(cfg, name), T_home, baseline_dir)
-        k = int(cfg.evaluate.max_candidates_checked) if bool(cfg.evaluate.check_reachability) \
-            else 1
-        return lambda depth, intr, rng: dex.plan(depth, intr, rng=rng, max_grasps=k)
+        return DexNetStylePlanner(cfg, dexnet_variant(cfg, name), T_home, baseline_dir)
     if name == "oracle":
         from pipeline.world.oracle import OraclePlanner
 
         return OraclePlanner(cfg, cell)
-    raise ValueError(f"unknown planner {name!r}: choose from {PLANNERS}")
+    return load_plugin(name, cfg)
 
 
-def _runner(name: str) -> PickRunner:
+def _runner(name: str) -> TrialRunner:
     if name not in _STATE["runners"]:
-        from pipeline.robot.model import robot_config
-        from pipeline.world.cell import PickCell
-        from pipeline.robot.model import Robot
-
         cfg = _STATE["cfg"]
-        cell = PickCell(cfg, lambda: Robot(robot_config(cfg)))
-        T_home = cell.robot.home_camera_pose()
-        plan = make_planner(cfg, name, _STATE["train_dir"], _STATE["baseline_dir"], T_home, cell)
-        _STATE["runners"][name] = PickRunner(cfg, cell, plan, name)
+        _STATE["runners"][name] = make_runner(cfg, name, lambda cell: make_planner(
+            cfg, name, _STATE["train_dir"], _STATE["baseline_dir"],
+            cell.robot.home_camera_pose(), cell))
     return _STATE["runners"][name]
 
 
 def run_task(task: TrialTask) -> tuple[TrialResult, dict]:
     cfg = _STATE["cfg"]
     runner = _runner(task.planner)
-    for v in runner.timings.values():
+    clocks = {**runner.timings, **runner.robot_side.timings}
+    for v in clocks.values():
         v.clear()
     seed = int(cfg.seed)
     keep = task.trial < int(cfg.evaluate.log_trials)
+    heap, plan, sensor = HEAP_STREAMS[str(cfg.evaluate.split)]
     t0 = time.perf_counter()
-    result = runner.run_trial(task.trial, np.random.default_rng([seed, HEAP_SEED, task.trial]),
-                              np.random.default_rng([seed, PLAN_SEED, task.trial]), keep,
-                              rng_sensor=np.random.default_rng([seed, SENSOR_SEED, task.trial]))
+    result = runner.run_trial(task.trial, np.random.default_rng([seed, heap, task.trial]),
+                              np.random.default_rng([seed, plan, task.trial]), keep,
+                              rng_sensor=np.random.default_rng([seed, sensor, task.trial]))
     wall = time.perf_counter() - t0
-    timings = {k: list(v) for k, v in runner.timings.items()}
+    timings = {k: list(v) for k, v in clocks.items()}
     timings["wall_s"] = wall
     return result, timings
-
-
-# ------------------------------------------------------------------------------ tables
-def summarise(results: list[TrialResult]) -> list[dict]:
-    """Table 3's numbers per planner (deterministic: simulated time only)."""
-    rows = []
-    for name in dict.fromkeys(r.planner for r in results):
-        rs = [r for r in results if r.planner == name]
-        atts = [a for r in rs for a in r.attempts]
-        succ = sum(a.outcome == "success" for a in atts)
-        sim_s = sum(r.sim_s for r in rs)
-        row = {"planner": name, "trials": len(rs), "boxes": sum(r.boxes for r in rs),
-               "picked": sum(r.picked for r in rs), "attempts": len(atts), "successes": succ,
-               "success_rate": round(succ / len(atts), 6) if atts else float("nan"),
-               "cleared_trials": sum(r.end == "bin_empty" for r in rs),
-               "sim_s": round(sim_s, 3),
-               "pph_motion": round(3600.0 * succ / sim_s, 1) if sim_s > 0 else float("nan"),
-               "wrong_target": sum(a.wrong_target for a in atts),
-               # DCNN attempts on candidates of the fallback tier (evaluate.dcnn_fallback_ratio)
-               "second_tier_attempts": sum(a.second_tier for a in atts),
-               "second_tier_successes": sum(a.second_tier and a.outcome == "success"
-                                            for a in atts)}
-        devs = [a.path_deviation_m for a in atts if a.path_deviation_m is not None]
-        # how far the executed servo strayed from the path the run-time check predicted
-        row["path_deviation_mm_median"] = round(1000 * float(np.median(devs)), 2) if devs \
-            else float("nan")
-        row["path_deviation_mm_max"] = round(1000 * float(np.max(devs)), 2) if devs \
-            else float("nan")
-        for o in OUTCOMES[1:]:
-            row[f"fail_{o}"] = sum(a.outcome == o for a in atts)
-        for e in TRIAL_ENDS:
-            row[f"end_{e}"] = sum(r.end == e for r in rs)
-        rows.append(row)
-    return rows
-
-
-def convergence_rows(results: list[TrialResult]) -> list[dict]:
-    rows = []
-    for r in results:
-        for s in r.trace:
-            e = s["error"]
-            rows.append({"planner": r.planner, "trial": r.trial, "attempt": s["attempt"],
-                         "step": s["step"], "t_s": round(float(s["t"]), 4),
-                         "translation_error": round(float(np.linalg.norm(e[:3])), 6),
-                         "rotation_error_deg": round(float(np.degrees(np.linalg.norm(e[3:]))), 4)})
-    return rows
 
 
 # ------------------------------------------------------------------------------ logs
@@ -304,6 +255,17 @@ def _log_final_home(log: StageLog, r: TrialResult, intr, prefix: str) -> None:
 
 
 # ------------------------------------------------------------------------------ the stage
+def plugin_source_hash(name: str) -> str:
+    """sha256 (16 hex digits) of the file of plug-in ``name``'s module ("" when it has none):
+    editing a plug-in gives its evaluation a new version."""
+    import hashlib
+    import importlib
+
+    module = importlib.import_module(plugin_target(name).partition(":")[0])
+    path = getattr(module, "__file__", None)
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16] if path else ""
+
+
 def _check_choice(what: str, value: str, choices: tuple[str, ...]) -> None:
     """A ValueError "<what> 'value': choose from (...)" unless ``value`` is one of ``choices``."""
     if value not in choices:
@@ -313,8 +275,15 @@ def _check_choice(what: str, value: str, choices: tuple[str, ...]) -> None:
 def evaluate(cfg: DictConfig) -> Path:
     """Run the closed-loop trials; returns the evaluation artifact folder."""
     planners = [str(p) for p in cfg.evaluate.planners]
-    for name in planners:
-        _check_choice("evaluate.planners has", name, PLANNERS)
+    if len(set(planners)) != len(planners):
+        raise ValueError(f"evaluate.planners names a planner twice: {planners}")
+    _check_choice("evaluate.split is", str(cfg.evaluate.split), tuple(HEAP_STREAMS))
+    _check_choice("evaluate.collision_model is", str(cfg.evaluate.collision_model),
+                  COLLISION_MODELS)
+    plugins = {}
+    for name in (n for n in planners if n not in PLANNERS):
+        load_plugin(name, cfg)  # a bad plug-in fails here, with its reason, before any trial
+        plugins[name] = plugin_source_hash(name)
     if int(cfg.evaluate.num_trials) < 1:
         raise ValueError(f"evaluate.num_trials must be >= 1, got {cfg.evaluate.num_trials}")
     check_renderer(str(cfg.camera.renderer))
@@ -347,6 +316,8 @@ def evaluate(cfg: DictConfig) -> Path:
                              f"{name}): run `make baseline` with {variant} in "
                              "baseline.variants, or pass another evaluate.baseline_version")
         upstream["baseline"] = baseline_dir.name
+    for name, digest in plugins.items():  # a plug-in's source is part of the version
+        upstream[f"plugin:{name}"] = digest
     config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
     version = compute_version(STAGE, config, upstream)
     cfg_obj = OmegaConf.to_object(cfg)

@@ -61,6 +61,7 @@ from pipeline.cli import (
     CONF_DIR, compose, data_root, own_overrides, scale_overrides, stage_main,
 )
 from pipeline.tracking import StageLog
+from pipeline.world.books import finite
 
 STAGE = "robustness"
 SECTIONS = ("seed", "robustness")
@@ -114,10 +115,11 @@ class Pipelines:
         lab = self._run("label_noisy", "label", [f"label.generate_version={gen.name}"])
         self._run("train_noisy", "train", [f"train.label_version={lab.name}"])
 
-    def evaluate(self, name: str, model: str, overrides: list[str], trials: int) -> Path:
+    def evaluate(self, name: str, model: str, overrides: list[str], trials: int,
+                 split: str) -> Path:
         return self._run(f"evaluate_{name}", "evaluate", [
             "planner=dcnn", f"evaluate.train_version={self.versions['train_' + model]}",
-            f"evaluate.num_trials={trials}", *overrides])
+            f"evaluate.num_trials={trials}", f"evaluate.split={split}", *overrides])
 
 
 # ------------------------------------------------------------------------------ Tables 1 and 2
@@ -205,19 +207,31 @@ def table2_rows(p: Pipelines, inputs: list[str], max_images: int, progress: bool
 
 
 # ------------------------------------------------------------------------------ closed loop
-def closed_loop_rows(p: Pipelines, group: str, variants, trials: int) -> list[dict]:
-    """One evaluation per variant (reused when its version exists) and its Table 3 row."""
+CLOSED_LOOP_KEYS = ("success_rate", "success_ci_low", "success_ci_high", "attempts",
+                    "successes", "picked", "boxes", "picked_rate", "picked_ci_low",
+                    "picked_ci_high", "pph_motion", "no_attempt_reason")
+
+
+def closed_loop_rows(p: Pipelines, group: str, variants, trials: dict[str, int]) -> list[dict]:
+    """One evaluation per variant (reused when its version exists) and its Table 3 row;
+    ``trials``: per split (``dev``, ``test``)."""
+    from pipeline.world.trial import HEAP_STREAMS
+
     rows = []
     for v in variants:
+        split = str(v.split)
+        if split not in HEAP_STREAMS:
+            raise ValueError(f"robustness variant {v.name}: split {split!r}, choose from "
+                             f"{tuple(HEAP_STREAMS)}")
         overrides = [str(o) for o in v.overrides]
-        out = p.evaluate(str(v.name), str(v.model), overrides, trials)
+        out = p.evaluate(str(v.name), str(v.model), overrides, trials[split], split)
         t3 = json.loads((out / "manifest.json").read_text())["metrics"]["table3"]
         row = next(r for r in t3 if r["planner"] == "dcnn")
         rows.append({"group": group, "variant": str(v.name), "model": str(v.model),
+                     "split": split, "trials": row.get("trials"),
                      "overrides": " ".join(overrides) or "-",
-                     **{k: row.get(k) for k in ("success_rate", "attempts", "successes",
-                                                "picked", "boxes", "pph_motion")},
-                     **{k: v for k, v in row.items() if k.startswith("fail_")},
+                     **{k: finite(row.get(k)) for k in CLOSED_LOOP_KEYS},
+                     **{k: v for k, v in row.items() if k.startswith(("fail_", "end_"))},
                      "evaluate_version": out.name})
     return rows
 
@@ -263,11 +277,18 @@ def robustness(cfg: DictConfig, overrides: list[str] | None = None) -> Path:
     t2_inputs = [str(x) for x in rc.table2_inputs]
     for name in set(t1_inputs + t2_inputs):
         depth_getter(name)  # a bad input name fails before any long work
+    from pipeline.world.trial import HEAP_STREAMS
+
     for v in list(rc.closed_loop) + list(rc.policies):
         if str(v.model) not in ("clean", "noisy"):
             raise ValueError(f"robustness variant {v.name!r} has model={v.model!r}: use clean "
                              "(trained on ideal depth) or noisy (trained on the sensor's depth)")
-    trials = int(rc.closed_loop_trials)
+        if str(v.split) not in HEAP_STREAMS:
+            raise ValueError(f"robustness variant {v.name!r} has split={v.split!r}: use dev "
+                             f"({rc.closed_loop_trials} trials) or test (the evaluation's "
+                             f"{cfg.evaluate.num_trials} test heaps)")
+    # dev variants: the study's own count; test: the evaluation's (Table 3's heaps)
+    trials = {"dev": int(rc.closed_loop_trials), "test": int(cfg.evaluate.num_trials)}
     with p.keep_latest():
         p.build(str(rc.train_version), str(rc.baseline_version))
         cl = closed_loop_rows(p, "sensor", rc.closed_loop, trials)

@@ -13,8 +13,8 @@ import pytest
 from conftest import default_config
 from pipeline.camera.geometry import Intrinsics
 from pipeline.labelling.types import GraspClass
-from pipeline.world.cell import Frame
-from pipeline.world.trial import PickRunner
+from pipeline.controller.observation import Observation
+from pipeline.controller.planning import Grasp
 from pipeline.planner.ranking import GraspCandidate, RankingConfig, graspability, order_candidates
 from pipeline.servo.descriptor import DescriptorConfig
 
@@ -71,12 +71,19 @@ def test_unknown_policy_is_a_clear_error():
         order_candidates([cand("a", 10, 0.5)], dataclasses.replace(PAPER, policy="tallest"))
 
 
-def _runner(ratio: float, intr: Intrinsics, cup_diameter: float = 0.030):
-    cfg = SimpleNamespace(evaluate=SimpleNamespace(min_area_ratio=ratio, max_candidates_checked=10),
-                          hand=SimpleNamespace(cup_diameter=cup_diameter))
-    return SimpleNamespace(cfg=cfg, cell=SimpleNamespace(intrinsics=intr),
-                           descriptor_cfg=default_config(
-                               DescriptorConfig, window_tolerance_depth=0.0, track_normal_deg=0.0))
+def _controller(ratio: float, cup_diameter: float = 0.030):
+    """The robot side's area check alone (``RobotController.large_enough``), without its
+    robot or its check."""
+    from pipeline.controller.picker import RobotController
+
+    ctrl = RobotController.__new__(RobotController)
+    ctrl.cfg = SimpleNamespace(
+        evaluate=SimpleNamespace(min_area_ratio=ratio, max_candidates_checked=10),
+        hand=SimpleNamespace(cup_diameter=cup_diameter))
+    ctrl.descriptor_cfg = default_config(DescriptorConfig, window_tolerance_depth=0.0,
+                                         track_normal_deg=0.0)
+    ctrl.timings = {"descriptor_s": []}
+    return ctrl
 
 
 def test_area_check_drops_surfaces_barely_larger_than_the_cup():
@@ -88,14 +95,17 @@ def test_area_check_drops_surfaces_barely_larger_than_the_cup():
     depth = np.full((160, 160), 0.60, np.float32)
     depth[20:42, 20:42] = 0.50
     depth[80:110, 80:110] = 0.50
-    frame = Frame(depth_m=depth, body_ids=np.zeros((160, 160), np.int32), T_world_cam=np.eye(4))
-    small, big, big_b = cand("small", 0, 0.5), cand("big", 0, 0.5), cand("big_b", 0, 0.5)
-    small.u = small.v = 30.5
-    big.u = big.v = big_b.u = big_b.v = 94.5
-    big_b.grasp_class = GraspClass.B
+    obs = Observation(depth, intr, np.eye(4), np.zeros(7))
+    small, big, big_b = (Grasp(30.5, 30.5, "L", score=1.0), Grasp(94.5, 94.5, "L", score=2.0),
+                         Grasp(94.5, 94.5, "B", score=3.0))
     cands = [small, big, big_b]
-    assert PickRunner.large_enough(_runner(0.0, intr), frame, cands) == cands  # off: unchanged
-    assert names(PickRunner.large_enough(_runner(1.0, intr), frame, cands)) == ["small", "big"]
-    assert names(PickRunner.large_enough(_runner(1.2, intr), frame, cands)) == ["big"]
+
+    def kept(ctrl):
+        return [{1.0: "small", 2.0: "big", 3.0: "big_b"}[g.score]
+                for g in ctrl.large_enough(obs, cands)]
+
+    assert _controller(0.0).large_enough(obs, cands) == cands  # off: unchanged
+    assert kept(_controller(1.0)) == ["small", "big"]
+    assert kept(_controller(1.2)) == ["big"]
     # 18-mm cups (2.54 cm²): 1.2 × two cups = 6.1 cm², every top passes
-    assert PickRunner.large_enough(_runner(1.2, intr, 0.018), frame, cands) == cands
+    assert _controller(1.2, 0.018).large_enough(obs, cands) == cands

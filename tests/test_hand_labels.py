@@ -150,3 +150,41 @@ def test_hold_check_one_cup_on_a_tilted_end_face(tilt_deg, holds):
     # 0.0725 × 0.6805 × 0.5736 / 0.009 = 3.14 N ≤ f_N = 12.7 - 0.6805 × 0.8192 = 12.14 N
     light = suction_model_config(composed(), 100.0)
     assert pattern_holds(surf, lab, box, T_world_cam, light, CFG.cup_offset)
+
+
+def test_a_blocked_b_falls_back_on_one_cup_by_hand():
+    """``robot_level_class``: B passes → B; B blocked ("collision") with L passing → L; L
+    failing its hold test and R passing → R; both blocked → NG with B's reason; no fallback
+    → NG. ``single_cup_order``: on a face tilted 20° about the camera's x axis (its +y side
+    nearer the camera), the hand's Y runs along the tilt, so one camera sits higher: that
+    pattern comes first; a level face ties and L comes first; an L has no fallback."""
+    from pipeline.labelling.hand import HandLabel
+    from pipeline.labelling.scene import robot_level_class, single_cup_order
+
+    b = HandLabel(GraspClass.B, np.array([1.0, 0, 0]), 0.0, 90.0, "long")
+    L, R = GraspClass.L, GraspClass.R
+
+    def check(blocked):
+        return lambda h: "collision" if h.grasp_class in blocked else None
+
+    def holds(failing=()):
+        return lambda h: h.grasp_class not in failing
+
+    assert robot_level_class(b, check(()), holds(), (L, R)) == (GraspClass.B, "")
+    assert robot_level_class(b, check({GraspClass.B}), holds(), (L, R)) == (L, "")
+    assert robot_level_class(b, check({GraspClass.B}), holds({L}), (L, R)) == (R, "")
+    assert robot_level_class(b, check({GraspClass.B, L, R}), holds(), (L, R)) == \
+        (GraspClass.NG, "collision")
+    assert robot_level_class(b, check({GraspClass.B}), holds(), ()) == (GraspClass.NG,
+                                                                       "collision")
+    hand = CFG
+    level = surface((1.0, 0, 0), (0, 0, -1.0), 0.145, 0.092)
+    lab = hand_label(level, hand)
+    assert lab.grasp_class == GraspClass.B and single_cup_order(level, lab, hand) == (L, R)
+    t = np.radians(20)
+    tilted = surface((1.0, 0, 0), (0, np.sin(t), -np.cos(t)), 0.145, 0.092)
+    lab = hand_label(tilted, hand)
+    z_l, z_r = (camera_centre(tilted, lab.x_axis_cam, c, hand)[2] for c in (L, R))
+    assert abs(z_l - z_r) > hand.tie_tolerance
+    assert single_cup_order(tilted, lab, hand) == ((R, L) if z_r < z_l else (L, R))
+    assert single_cup_order(level, dataclasses.replace(lab, grasp_class=L), hand) == ()

@@ -1,10 +1,12 @@
 """Choosing what the robot executes: the run-time check gates every target, retries differ.
 
 Hand-worked on one box lying flat in the middle of the bin (its top face at the image centre
-is reachable with both cups) and on a pixel of the bin floor 2 cm from the +y wall. The servo
-of a DCNN candidate tracks the centre of the surface the descriptor grows at its pixel, so that
-is what the check tests: for the floor pixel, the floor around the box, whose centre is the bin
-centre, under the box: the hand would be inside the box, a rejection.
+is reachable with both cups) and on a pixel of the bin floor 2 cm from the +y wall. The robot
+side (``pipeline.controller.picker.RobotController``) plans on the world's observation only:
+its check knows the heap from the home depth image. The servo of a patterned grasp tracks the
+centre of the surface the descriptor grows at its pixel, so that is what the check tests: for
+the floor pixel, the floor around the box, whose centre is the bin centre, under the box: the
+hand would be inside the box (its columns in the heap model), a rejection.
 """
 
 from __future__ import annotations
@@ -17,22 +19,39 @@ import pytest
 
 from conftest import default_config
 from pipeline.camera.geometry import project, world_to_camera
-from pipeline.labelling.types import GraspClass
+from pipeline.controller.planning import Grasp
+
+
+class Scripted:
+    """A planner that returns the last list appended to ``plans`` (none: no grasp)."""
+
+    def __init__(self):
+        self.plans = []
+
+    def plan(self, observation, rng):
+        return self.plans[-1] if self.plans else []
+
+
+def _runner(cfg, name="test"):
+    """The world (a cell) and the robot side (a controller with a scripted planner)."""
+    from pipeline.controller.picker import RobotController
+    from pipeline.robot.model import Robot, robot_config
+    from pipeline.world.cell import PickCell
+    from pipeline.world.trial import TrialRunner
+
+    cell = PickCell(cfg, lambda: Robot(robot_config(cfg)))
+    planner = Scripted()
+    runner = TrialRunner(cfg, cell, RobotController(cfg, planner, name), name)
+    runner.plans = planner.plans  # what the planner returns next: append a list of grasps
+    return runner
 
 
 def _one_box_runner(smoke_cfg, name: str, size: list[float]):
-    """A PickRunner whose cell holds one box of ``size`` (m) flat at the bin centre, at rest."""
-    from pipeline.robot.model import robot_config
-    from pipeline.world.cell import PickCell
-    from pipeline.world.trial import PickRunner
-    from pipeline.robot.model import Robot
-
+    """A runner whose cell holds one box of ``size`` (m) flat at the bin centre, at rest."""
     cfg = smoke_cfg("evaluate", "evaluate.boxes_per_trial=1",
                     f"eval_boxes.types=[{{name: {name}, size: {list(size)}}}]")
-    cell = PickCell(cfg, lambda: Robot(robot_config(cfg)))
-    calls = []
-    r = PickRunner(cfg, cell, lambda d, i, rng: calls[-1] if calls else [], "test")
-    r.plans = calls  # what the planner returns next: append a list of candidates
+    r = _runner(cfg)
+    cell = r.cell
     cell.reset(np.random.default_rng(0), 1)
     (body,) = list(cell.boxes)
     p.resetBasePositionAndOrientation(body, [0, 0, size[2] / 2], [0, 0, 0, 1],
@@ -41,61 +60,85 @@ def _one_box_runner(smoke_cfg, name: str, size: list[float]):
     return r
 
 
+def _close(r):
+    r.cell.close()
+    r.robot_side.close()
+
+
 @pytest.fixture
 def runner(smoke_cfg):
     r = _one_box_runner(smoke_cfg, "medium", [0.145, 0.092, 0.052])
     yield r
-    r.cell.close()
+    _close(r)
 
 
 @pytest.fixture
 def cube_runner(smoke_cfg):
     r = _one_box_runner(smoke_cfg, "cube", [0.06, 0.06, 0.07])
     yield r
-    r.cell.close()
+    _close(r)
 
 
-def _pixel_of(runner, point_world):
-    frame = runner.cell.render()
-    u, v = project(world_to_camera(np.asarray(point_world), frame.T_world_cam),
-                   runner.cell.intrinsics)
-    return frame, float(u), float(v)
+def _home(runner):
+    """The home observation of the world as it is now."""
+    runner.cell.robot.set_joints(runner.cell.robot.home_q())
+    return runner.cell.observe()
+
+
+def _grasp(obs, point_world, pattern="B", **kw):
+    u, v = project(world_to_camera(np.asarray(point_world, float), obs.T_world_cam),
+                   obs.intrinsics)
+    return Grasp(float(u), float(v), pattern, **kw)
+
+
+def _check(runner, obs, grasp, pattern):
+    """The run-time check of ``grasp`` with ``pattern`` on the home ``obs``: (check, reason)."""
+    ctrl = runner.robot_side
+    ctrl.checker.update(obs)
+    feats, _ = ctrl.home_surface(obs, grasp, [grasp])
+    return ctrl.checker.check(obs, feats, feats.center_cam, pattern, (grasp.u, grasp.v),
+                              hand_fit=True)
+
+
+def _select(runner, obs, grasps):
+    return runner.robot_side.select(obs, grasps)
 
 
 def test_a_reachable_target_is_chosen_and_a_rejected_one_never(runner):
     (body,) = list(runner.cell.boxes)
-    frame, u, v = _pixel_of(runner, [0, 0, 0.052])  # the box's top face centre
-    good = SimpleNamespace(u=u, v=v, grasp_class=GraspClass.B)
-    _, wu, wv = _pixel_of(runner, [0.1, 0.13, 0.0])
-    bad = SimpleNamespace(u=wu, v=wv, grasp_class=GraspClass.B)
-    assert runner._target_of(frame, good)[0] == body
-    assert runner._reachable(frame, good, "B", body) is not None
-    assert runner._reachable(frame, bad, "B", -1) is None
+    obs = _home(runner)
+    good = _grasp(obs, [0, 0, 0.052])  # the box's top face centre
+    bad = _grasp(obs, [0.1, 0.13, 0.0])
+    assert runner.target_of(good.u, good.v) == body  # the world's books
+    assert _check(runner, obs, good, "B")[0] is not None
+    assert _check(runner, obs, bad, "B")[0] is None
     # G_opt is the rejected one: the next candidate is executed, never G_opt
-    assert runner.select(frame, [bad, good], [])[:2] == (good, "B")
+    chosen = _select(runner, obs, [bad, good]).plan
+    assert (chosen.grasp, chosen.pattern) == (good, "B")
     # nothing passes: no grasp (the trial ends), G_opt is not run anyway
-    rejected = {}
-    assert runner.select(frame, [bad, bad], [], rejected) is None
-    # the point on the bin floor near a corner: the hand at that pose is in the walls, with B
-    # and with each single cup of the fallback (evaluate.single_cup_fallback)
-    assert rejected == {"collision": 2 * 3}
+    result = _select(runner, obs, [bad, bad])
+    assert result.plan is None
+    # the floor point's surface is the floor around the box, centred under it: the hand there
+    # is in the box's columns, with B and with each single cup of the fallback
+    assert sum(result.rejected.values()) == 2 * 3
+    assert set(result.rejected) <= {"collision", "path_collision"}
     runner.plans.append([bad])
     runner.cell.reset = lambda rng, count: None  # the trial keeps this heap
-    result = runner.run_trial(0, np.random.default_rng(0), np.random.default_rng(1))
-    assert result.end == "no_grasp" and result.attempts == []
+    trial = runner.run_trial(0, np.random.default_rng(0), np.random.default_rng(1))
+    assert trial.end == "no_grasp" and trial.attempts == []
     # the labels on that image hold a grasp the check passes (the box's top face): the planner's
     # perception lost the box, not execution (evaluate.label_no_grasp)
-    assert result.no_grasp == {"boxes_left": 1, "candidates": 1, "checked": 1,
-                               "rejected": {"collision": 3}, "label_candidates": 1,
-                               "label_executable": True}
-    assert result.final_home == {}  # kept only with the trace (evaluate.log_trials)
+    assert trial.no_grasp["label_candidates"] == 1 and trial.no_grasp["label_executable"]
+    assert {k: trial.no_grasp[k] for k in ("boxes_left", "candidates", "checked")} == \
+        {"boxes_left": 1, "candidates": 1, "checked": 1}
+    assert trial.final_home == {}  # kept only with the trace (evaluate.log_trials)
     runner.plans.append([bad])
     traced = runner.run_trial(0, np.random.default_rng(0), np.random.default_rng(1),
                               keep_trace=True)
     home = traced.final_home
-    assert home["depth_m"].shape == frame.depth_m.shape
-    np.testing.assert_allclose(home["T_world_cam"], frame.T_world_cam, atol=1e-3)  # home, by IK
-    np.testing.assert_allclose(home["candidates_px"], [[wu, wv]])
+    assert home["depth_m"].shape == obs.depth_m.shape
+    np.testing.assert_allclose(home["T_world_cam"], obs.T_world_cam, atol=1e-3)  # home, by IK
+    np.testing.assert_allclose(home["candidates_px"], [[bad.u, bad.v]])
     (left,) = home["boxes_left"]
     assert left["body"] == body and left["type"] == runner.cell.boxes[body]["type"]
     np.testing.assert_allclose(left["position"], runner.cell.box_pose(body)[0])
@@ -107,61 +150,64 @@ def test_the_preferred_clearance_never_rejects_what_the_check_accepts(runner):
     more from every wall: its top face passes the first pass (10 mm) with the same hand axis
     and path as the plain check. A clearance no path has (1 m) fails the first pass at every
     rotation, and the plain check still accepts the grasp."""
-    from pipeline.world.trial import _with_bin_clearance
-
-    (body,) = list(runner.cell.boxes)
-    frame, u, v = _pixel_of(runner, [0, 0, 0.052])
-    good = SimpleNamespace(u=u, v=v, grasp_class=GraspClass.B)
+    obs = _home(runner)
+    good = _grasp(obs, [0, 0, 0.052])
+    checker = runner.robot_side.checker
     assert runner.cfg.evaluate.preferred_bin_clearance == pytest.approx(0.01)
-    assert runner._comfort_cfg.robot.path.bin_clearance == pytest.approx(0.01)
-    assert runner.cfg.robot.path.bin_clearance == 0.0  # the caller's config is not changed
-    comfortable = runner._reachable(frame, good, "B", body)
-    runner._comfort_cfg = None
-    plain = runner._reachable(frame, good, "B", body)
+    assert checker.comfort == pytest.approx(0.01)
+    comfortable, _ = _check(runner, obs, good, "B")
+    checker.comfort = None
+    plain, _ = _check(runner, obs, good, "B")
     np.testing.assert_allclose(comfortable.x_world, plain.x_world)
     assert len(comfortable.path) == len(plain.path)
-    runner._comfort_cfg = _with_bin_clearance(runner.cfg, 1.0)
-    unreachable = runner._reachable(frame, good, "B", body)
+    checker.comfort = 1.0
+    unreachable, _ = _check(runner, obs, good, "B")
     np.testing.assert_allclose(unreachable.x_world, plain.x_world)
 
 
+def _fail(runner, obs, grasp, pattern, outcome="dropped"):
+    """The robot remembers a failed plan of ``grasp`` with ``pattern`` on ``obs``."""
+    from pipeline.controller.picker import Plan
+
+    ctrl = runner.robot_side
+    ctrl.remember_failure(Plan(grasp, pattern, obs, ctrl.point_world(obs, grasp)), outcome)
+
+
+def _move(runner, body, position):
+    p.resetBasePositionAndOrientation(body, position, [0, 0, 0, 1],
+                                      physicsClientId=runner.cell.client)
+
+
 def test_a_retry_after_a_failure_differs(runner):
-    """A failed plan (box b, pattern B, point P) is skipped while b has not moved; a different
-    pattern, a point 5 cm away, or the box moved by 1 cm or turned by 10° make it a new plan."""
+    """A failed plan (pattern B at the top's centre P) is skipped while the heap looks the same;
+    the fallback's L is a new plan; without the fallback nothing is left; the box moved by 1 cm
+    (its edges change about 2 x 9.2 cm x 1 cm of depth, > 5 cm²) makes B a new plan; with
+    retry_policy=repeat B is chosen again on the old image."""
     (body,) = list(runner.cell.boxes)
-    pos, quat = runner.cell.box_pose(body)
-    P = np.array([0.0, 0.0, 0.052])
-    failed = [runner.failure_record(body, "B", P)]
-    assert failed[0]["neighbours"] == {}  # the box is alone in the bin
-    assert runner._repeats_failure(body, "B", P + [0.01, 0, 0], failed)  # 1 cm: same plan
-    assert not runner._repeats_failure(body, "L", P, failed)
-    assert not runner._repeats_failure(body, "B", P + [0.05, 0, 0], failed)
-    moved = [dict(failed[0], position=pos + [0.01, 0, 0])]
-    assert not runner._repeats_failure(body, "B", P, moved)
-    half = np.radians(10) / 2
-    turned = [dict(failed[0], quat=np.array([0, 0, np.sin(half), np.cos(half)]))]
-    assert not runner._repeats_failure(body, "B", P, turned)
-    # the same candidate is skipped by select; with retry_policy=repeat it is chosen again
-    frame, u, v = _pixel_of(runner, P)
-    cand = SimpleNamespace(u=u, v=v, grasp_class=GraspClass.B)
-    rejected = {}
-    assert runner.select(frame, [cand], failed, rejected)[:2] == (cand, "L")  # the fallback
-    assert rejected == {"repeat": 1}
+    obs = _home(runner)
+    g = _grasp(obs, [0, 0, 0.052])
+    _fail(runner, obs, g, "B")
+    result = _select(runner, obs, [g])
+    assert result.plan.pattern == "L" and result.rejected == {"repeat": 1}  # the fallback
     runner.cfg.evaluate.single_cup_fallback = False
-    rejected = {}
-    assert runner.select(frame, [cand], failed, rejected) is None
-    assert rejected == {"repeat": 1}
+    result = _select(runner, obs, [g])
+    assert result.plan is None and result.rejected == {"repeat": 1}
+    _move(runner, body, [0.01, 0, 0.026])
+    moved = _home(runner)
+    assert _select(runner, moved, [_grasp(moved, [0.01, 0, 0.052])]).plan.pattern == "B"
     runner.cfg.evaluate.retry_policy = "repeat"
-    assert runner.select(frame, [cand], failed)[:2] == (cand, "B")
+    runner.robot_side.memory.policy = "repeat"
+    assert _select(runner, obs, [g]).plan.pattern == "B"
 
 
 def _add_cube(runner, xy):
     """A 6 cm cube resting on the bin floor at ``xy`` (world, m), one of the cell's boxes."""
     cell = runner.cell
     shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=[0.03] * 3, physicsClientId=cell.client)
-    body = p.createMultiBody(0.1, shape, basePosition=[xy[0], xy[1], 0.03],
+    visual = p.createVisualShape(p.GEOM_BOX, halfExtents=[0.03] * 3, physicsClientId=cell.client)
+    body = p.createMultiBody(0.1, shape, visual, basePosition=[xy[0], xy[1], 0.03],
                              physicsClientId=cell.client)
-    cell.boxes[body] = {"type": "cube", "size": [0.06, 0.06, 0.06]}
+    cell.boxes[body] = {"type": "cube", "size": np.array([0.06, 0.06, 0.06]), "mass": 0.1}
     return body
 
 
@@ -169,58 +215,57 @@ def test_a_failure_at_the_point_skips_every_pattern_there(runner):
     """After a lost target or a seal that did not form (``evaluate.retry_point_outcomes``), the
     point failed, not the pattern: B, L and R there are all repeats while the heap is
     unchanged; 5 cm away is a new plan. After a drop only the dropped pattern is."""
-    (body,) = list(runner.cell.boxes)
-    P = np.array([0.0, 0.0, 0.052])
+    obs = _home(runner)
+    g = _grasp(obs, [0, 0, 0.052])
+    memory = runner.robot_side.memory
+    P = runner.robot_side.point_world(obs, g)
     assert list(runner.cfg.evaluate.retry_point_outcomes) == ["lost_target", "no_seal"]
     for outcome in ("lost_target", "no_seal"):
-        failed = [{**runner.failure_record(body, "B", P), "outcome": outcome}]
-        assert all(runner._repeats_failure(body, pat, P, failed) for pat in ("B", "L", "R"))
-        assert not runner._repeats_failure(body, "L", P + [0.05, 0, 0], failed)
-    failed = [{**runner.failure_record(body, "B", P), "outcome": "dropped"}]
-    assert runner._repeats_failure(body, "B", P, failed)
-    assert not runner._repeats_failure(body, "L", P, failed)
+        memory.clear()
+        _fail(runner, obs, g, "B", outcome)
+        assert all(memory.repeats(obs, P, pat) for pat in ("B", "L", "R"))
+        assert not memory.repeats(obs, P + [0.05, 0, 0], "L")
+    memory.clear()
+    _fail(runner, obs, g, "B", "dropped")
+    assert memory.repeats(obs, P, "B") and not memory.repeats(obs, P, "L")
 
 
 def test_a_retry_is_new_once_the_heap_around_it_changes(runner):
     """The failed plan on the medium box at the bin centre (P = its top face centre) stays
-    skipped while its surroundings are as they were; a cube whose centre was 0.10 m from P
-    (< retry_neighbour_m = 0.15 m) being picked, or moving 1 cm, makes it a new plan; a cube
-    0.17 m away (> 0.15 m) does not count, unless it comes nearer."""
-    (body,) = list(runner.cell.boxes)
-    P = np.array([0.0, 0.0, 0.052])
-    near = _add_cube(runner, [0.0, 0.1])  # |(0, 0.1, 0.03) - P| = 0.102 m
-    far = _add_cube(runner, [0.17, 0.0])  # |(0.17, 0, 0.03) - P| = 0.171 m
-    failed = [runner.failure_record(body, "B", P)]
-    assert set(failed[0]["neighbours"]) == {near}
-    assert runner._repeats_failure(body, "B", P, failed)
+    skipped while the depth around it is as it was; a cube whose centre is 0.10 m from P
+    (< retry_neighbour_m = 0.15 m) moving 1 cm, or being picked, makes it a new plan; a cube
+    0.22 m away (its nearest side 0.19 m from P) does not count."""
+    obs0 = _home(runner)
+    g = _grasp(obs0, [0, 0, 0.052])
+    memory = runner.robot_side.memory
+    P = runner.robot_side.point_world(obs0, g)
+    near = _add_cube(runner, [0.0, 0.1])
+    far = _add_cube(runner, [0.22, 0.0])
+    obs = _home(runner)
+    _fail(runner, obs, g, "B")
+    assert memory.repeats(_home(runner), P, "B")
     runner.cell.remove_box(far)  # picked, but out of reach of the failed plan
-    assert runner._repeats_failure(body, "B", P, failed)
-    p.resetBasePositionAndOrientation(near, [0.0, 0.11, 0.03], [0, 0, 0, 1],
-                                      physicsClientId=runner.cell.client)
-    assert not runner._repeats_failure(body, "B", P, failed)  # the neighbour moved by 1 cm
-    p.resetBasePositionAndOrientation(near, [0.0, 0.1, 0.03], [0, 0, 0, 1],
-                                      physicsClientId=runner.cell.client)
-    assert runner._repeats_failure(body, "B", P, failed)  # back where it was
+    assert memory.repeats(_home(runner), P, "B")
+    _move(runner, near, [0.0, 0.11, 0.03])
+    assert not memory.repeats(_home(runner), P, "B")  # the neighbour moved by 1 cm
+    _move(runner, near, [0.0, 0.1, 0.03])
+    assert memory.repeats(_home(runner), P, "B")  # back where it was
     runner.cell.remove_box(near)  # the neighbour was picked
-    assert not runner._repeats_failure(body, "B", P, failed)
-    # a failure recorded with nothing near; then a box slides within 0.15 m: a new plan
-    failed = [runner.failure_record(body, "B", P)]
-    assert runner._repeats_failure(body, "B", P, failed)
-    _add_cube(runner, [0.12, 0.0])  # 0.121 m from P
-    assert not runner._repeats_failure(body, "B", P, failed)
+    assert not memory.repeats(_home(runner), P, "B")
 
 
 def test_single_point_tries_the_other_cup(runner):
-    """A Dex-Net-style point (no class) gets ``dexnet_pattern`` (L) first, then R; when L was
+    """A Dex-Net-style point (no pattern) gets ``dexnet_pattern`` (L) first, then R; when L was
     the failed plan, R is next."""
-    (body,) = list(runner.cell.boxes)
-    frame, u, v = _pixel_of(runner, [0, 0, 0.052])
-    point_cam = world_to_camera(np.array([0, 0, 0.052]), frame.T_world_cam)
-    cand = SimpleNamespace(u=u, v=v, grasp_class=None, point_cam=point_cam)
-    assert runner._patterns(cand) == ["L", "R"]
-    assert runner.select(frame, [cand], [])[:2] == (cand, "L")
-    failed = [runner.failure_record(body, "L", np.array([0, 0, 0.052]))]
-    assert runner.select(frame, [cand], failed)[:2] == (cand, "R")
+    obs = _home(runner)
+    point_cam = world_to_camera(np.array([0, 0, 0.052]), obs.T_world_cam)
+    g = _grasp(obs, [0, 0, 0.052], pattern=None, point_cam=point_cam)
+    assert runner.robot_side.patterns(g) == ["L", "R"]
+    plan = _select(runner, obs, [g]).plan
+    assert plan.pattern == "L"
+    np.testing.assert_allclose(plan.fixed_point_world, [0, 0, 0.052], atol=1e-6)
+    _fail(runner, obs, g, "L")
+    assert _select(runner, obs, [g]).plan.pattern == "R"
 
 
 def test_a_b_that_does_not_fit_is_tried_with_one_cup(cube_runner):
@@ -230,22 +275,20 @@ def test_a_b_that_does_not_fit_is_tried_with_one_cup(cube_runner):
     the B candidate is executed with L, and after a failed L with R; without it, nothing passes
     and the only rejection is B's fit."""
     runner = cube_runner
-    (body,) = list(runner.cell.boxes)
-    frame, u, v = _pixel_of(runner, [0, 0, 0.07])
-    cand = SimpleNamespace(u=u, v=v, grasp_class=GraspClass.B)
+    obs = _home(runner)
+    g = _grasp(obs, [0, 0, 0.07])
     assert runner.cfg.evaluate.single_cup_fallback  # the default
-    assert runner._patterns(cand) == ["B", "L", "R"]
-    rejected = {}
-    assert runner.select(frame, [cand], [], rejected)[:2] == (cand, "L")
-    assert rejected == {"hand_fit": 1}
-    failed = [runner.failure_record(body, "L", np.array([0, 0, 0.07]))]
-    assert runner.select(frame, [cand], failed)[:2] == (cand, "R")
+    assert runner.robot_side.patterns(g) == ["B", "L", "R"]
+    result = _select(runner, obs, [g])
+    assert result.plan.pattern == "L" and result.rejected == {"hand_fit": 1}
+    _fail(runner, obs, g, "L")
+    assert _select(runner, obs, [g]).plan.pattern == "R"
     # an L or R candidate has no fallback
-    assert runner._patterns(SimpleNamespace(u=u, v=v, grasp_class=GraspClass.L)) == ["L"]
+    assert runner.robot_side.patterns(Grasp(g.u, g.v, "L")) == ["L"]
     runner.cfg.evaluate.single_cup_fallback = False
-    rejected = {}
-    assert runner.select(frame, [cand], [], rejected) is None
-    assert rejected == {"hand_fit": 1}
+    runner.robot_side.memory.clear()
+    result = _select(runner, obs, [g])
+    assert result.plan is None and result.rejected == {"hand_fit": 1}
 
 
 def test_dexnet_alternatives_follow_the_best_by_quality():
@@ -301,6 +344,17 @@ def _level_face(z=0.5):
         warped_short=np.array([0, 1.0, 0]))
 
 
+def _first_goal(runner, centre, feats, pattern, T_home):
+    """``pipeline.robot.approach.first_goal`` as the robot's servo calls it at its first step
+    (the hand's X by the paper's rule)."""
+    from pipeline.controller.check import paper_x_axis
+    from pipeline.robot.approach import first_goal
+
+    ctrl = runner.robot_side
+    return first_goal(ctrl.servo_cfg, runner.cfg, T_home, centre, feats.normal_cam,
+                      paper_x_axis(feats), pattern, runner.cell.intrinsics)
+
+
 def test_lifted_goal_by_hand(runner):
     """Home camera looking straight down at a level face 0.5 m away. The grasp pose for B is
     0.15 m above the centre (seen at (0, 0, 0.15)); lifted by 0.30 − 0.15 = 0.15 m it sees the
@@ -310,17 +364,17 @@ def test_lifted_goal_by_hand(runner):
     T_home = runner.cell.robot.home_camera_pose()
     centre, feats = _level_face()
     runner.cfg.motion.approach = "lift"
-    cfg, d = runner._first_goal(centre, feats, None, "B", T_home)
+    cfg, d = _first_goal(runner, centre, feats, "B", T_home)
     assert d == pytest.approx(0.30)
     assert cfg.target_point == pytest.approx((0.0, 0.0, 0.30), abs=1e-9)
-    cfg, d = runner._first_goal(centre, feats, None, "L", T_home)
+    cfg, d = _first_goal(runner, centre, feats, "L", T_home)
     assert cfg.target_point == pytest.approx((0.0, -0.035, 0.30), abs=1e-9)
     runner.cfg.motion.approach = "pregrasp"
-    cfg, d = runner._first_goal(centre, feats, None, "B", T_home)
+    cfg, d = _first_goal(runner, centre, feats, "B", T_home)
     assert d == pytest.approx(0.30) and cfg.standoff == pytest.approx(0.30)
     runner.cfg.motion.approach = "direct"
-    cfg, d = runner._first_goal(centre, feats, None, "B", T_home)
-    assert d == pytest.approx(0.15) and cfg is runner.servo_cfg
+    cfg, d = _first_goal(runner, centre, feats, "B", T_home)
+    assert d == pytest.approx(0.15) and cfg is runner.robot_side.servo_cfg
 
 
 def test_lift_is_cut_to_keep_a_steep_face_in_view(runner):
@@ -334,7 +388,7 @@ def test_lift_is_cut_to_keep_a_steep_face_in_view(runner):
                             short_axis_cam=np.cross(normal, [1.0, 0, 0]),
                             warped_long=np.array([1.0, 0, 0]), warped_short=np.array([0, 1.0, 0]))
     runner.cfg.motion.approach = "lift"
-    cfg, d = runner._first_goal(np.array([0.0, 0.0, 0.5]), feats, None, "B", T_home)
+    cfg, d = _first_goal(runner, np.array([0.0, 0.0, 0.5]), feats, "B", T_home)
     assert 0.15 < d < 0.30
     x, y, z = cfg.target_point
     intr = runner.cell.intrinsics
@@ -345,21 +399,15 @@ def test_lift_is_cut_to_keep_a_steep_face_in_view(runner):
 def two_boxes(smoke_cfg):
     """Two medium boxes (145 × 92 × 52 mm) lying flat side by side, touching along y = 0: their
     top faces are coplanar at z = 52 mm, centred at (0, ±0.046, 0.052)."""
-    from pipeline.robot.model import robot_config
-    from pipeline.world.cell import PickCell
-    from pipeline.world.trial import PickRunner
-    from pipeline.robot.model import Robot
-
     cfg = smoke_cfg("evaluate", "evaluate.boxes_per_trial=2",
                     "eval_boxes.types=[{name: medium, size: [0.145, 0.092, 0.052]}]")
-    cell = PickCell(cfg, lambda: Robot(robot_config(cfg)))
-    r = PickRunner(cfg, cell, lambda d, i, rng: [], "test")
-    cell.reset(np.random.default_rng(0), 2)
-    for body, y in zip(cell.boxes, (-0.046, 0.046)):
+    r = _runner(cfg)
+    r.cell.reset(np.random.default_rng(0), 2)
+    for body, y in zip(r.cell.boxes, (-0.046, 0.046)):
         p.resetBasePositionAndOrientation(body, [0, y, 0.026], [0, 0, 0, 1],
-                                          physicsClientId=cell.client)
+                                          physicsClientId=r.cell.client)
     yield r
-    cell.close()
+    _close(r)
 
 
 def test_coplanar_faces_of_two_boxes_are_split_between_the_planners_points(two_boxes):
@@ -367,37 +415,35 @@ def test_coplanar_faces_of_two_boxes_are_split_between_the_planners_points(two_b
     (y = 0); with the other face's point 92 mm away (> face_split_m) in that region, the
     surface the check tests and the servo tracks is the chosen face: centre (0, −0.046, 0.052)."""
     runner = two_boxes
+    ctrl = runner.robot_side
     a, b = list(runner.cell.boxes)
-    frame, ua, va = _pixel_of(runner, [0, -0.046, 0.052])
-    _, ub, vb = _pixel_of(runner, [0, 0.046, 0.052])
-    cand_a = SimpleNamespace(u=ua, v=va, grasp_class=GraspClass.B)
-    cand_b = SimpleNamespace(u=ub, v=vb, grasp_class=GraspClass.B)
-    assert runner._target_of(frame, cand_a)[0] == a and runner._target_of(frame, cand_b)[0] == b
+    obs = _home(runner)
+    ga, gb = _grasp(obs, [0, -0.046, 0.052]), _grasp(obs, [0, 0.046, 0.052])
+    assert runner.target_of(ga.u, ga.v) == a and runner.target_of(gb.u, gb.v) == b
 
     def world(point_cam):
-        T = frame.T_world_cam
+        T = obs.T_world_cam
         return T[:3, :3] @ point_cam + T[:3, 3]
 
-    alone, sites = runner._home_surface(frame, cand_a, [cand_a])
+    alone, sites = ctrl.home_surface(obs, ga, [ga])
     assert sites is None  # no other point: the whole region
     assert abs(world(alone.center_cam)[1]) < 0.003  # its centre is on the seam
     assert alone.short_length == pytest.approx(0.145, abs=0.004)
     assert alone.long_length == pytest.approx(0.184, abs=0.004)
-    part, sites = runner._home_surface(frame, cand_a, [cand_a, cand_b])
+    part, sites = ctrl.home_surface(obs, ga, [ga, gb])
     assert sites.shape == (2, 3)
     np.testing.assert_allclose(sites, [[0, -0.046, 0.052], [0, 0.046, 0.052]], atol=0.002)
     np.testing.assert_allclose(world(part.center_cam), [0, -0.046, 0.052], atol=0.003)
     assert part.long_length == pytest.approx(0.145, abs=0.004)
     assert part.short_length == pytest.approx(0.092, abs=0.004)
     # the choice carries the sites to the attempt
-    chosen = runner.select(frame, [cand_a, cand_b], [])
-    assert chosen[0] is cand_a and chosen[4].shape == (2, 3)
+    plan = _select(runner, obs, [ga, gb]).plan
+    assert plan.grasp is ga and plan.sites_world.shape == (2, 3)
     # a point of the same face (3 cm away, < face_split_m) splits nothing; nor does 0 (off)
-    _, uc, vc = _pixel_of(runner, [0.03, -0.046, 0.052])
-    near = SimpleNamespace(u=uc, v=vc, grasp_class=GraspClass.B)
-    assert runner._home_surface(frame, cand_a, [cand_a, near])[1] is None
+    near = _grasp(obs, [0.03, -0.046, 0.052])
+    assert ctrl.home_surface(obs, ga, [ga, near])[1] is None
     runner.cfg.evaluate.face_split_m = 0.0
-    assert runner._home_surface(frame, cand_a, [cand_a, cand_b])[1] is None
+    assert ctrl.home_surface(obs, ga, [ga, gb])[1] is None
 
 
 def test_pattern_fits_by_the_hand_level_rule(smoke_cfg):
@@ -407,7 +453,7 @@ def test_pattern_fits_by_the_hand_level_rule(smoke_cfg):
     centre (9 mm) fits: L, R. X along the short axis: Y half-length 72.5 mm ≥ 44 mm and
     9 mm ≤ 26 mm: B fits. A 90 × 90 mm face: 44 mm ≤ 45 mm, B fits (the labels' 2 mm margin
     would say no). Area: B needs 1.2 × 2 × π 9² mm² = 610.7 mm², one cup 305.4 mm²."""
-    from pipeline.world.trial import pattern_fits
+    from pipeline.controller.check import pattern_fits
 
     hand = smoke_cfg("evaluate").hand
     face = dict(long_length=0.145, short_length=0.052, area=0.145 * 0.052)
@@ -433,8 +479,6 @@ def test_pattern_fits_by_the_hand_level_rule(smoke_cfg):
 def test_the_labels_are_asked_only_when_wanted(smoke_cfg):
     """``evaluate.label_no_grasp=false``: a "no grasp" end records the planner's figures alone;
     the oracle's own trials are never asked (it is the labels)."""
-    from pipeline.world.trial import PickRunner
-
     r = _one_box_runner(smoke_cfg, "medium", [0.145, 0.092, 0.052])
     try:
         r.cell.reset = lambda rng, count: None
@@ -442,8 +486,8 @@ def test_the_labels_are_asked_only_when_wanted(smoke_cfg):
         off = r.run_trial(0, np.random.default_rng(0), np.random.default_rng(1))
         assert off.end == "no_grasp" and "label_executable" not in off.no_grasp
         r.cfg.evaluate.label_no_grasp = True
-        oracle = PickRunner(r.cfg, r.cell, lambda d, i, rng: [], "oracle")
-        res = oracle.run_trial(0, np.random.default_rng(0), np.random.default_rng(1))
+        r.name = "oracle"
+        res = r.run_trial(0, np.random.default_rng(0), np.random.default_rng(1))
         assert res.end == "no_grasp" and "label_executable" not in res.no_grasp
     finally:
-        r.cell.close()
+        _close(r)

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from pipeline.world.trial import move_time
+from pipeline.controller.motion import move_time
 
 
 def test_move_time_trapezoid_and_triangle():
@@ -18,41 +18,40 @@ def test_move_time_trapezoid_and_triangle():
 
 
 class _Oracle:
-    """Plans the centre of the most visible box's top face with both cups (B)."""
+    """Plans the centre of the most visible box's top face with both cups (B), from the
+    world's body ids (a test's oracle)."""
 
     def __init__(self, cell):
         self.cell = cell
 
-    def __call__(self, depth, intr, rng):
-        from types import SimpleNamespace
+    def plan(self, observation, rng):
+        from pipeline.controller.planning import Grasp
 
-        from pipeline.labelling.types import GraspClass
-
-        frame = self.cell.render()
-        ids, counts = np.unique(frame.body_ids[np.isin(frame.body_ids, list(self.cell.boxes))],
-                                return_counts=True)
-        if len(ids) == 0:
+        ids = self.cell.last_frame.body_ids
+        seen, counts = np.unique(ids[np.isin(ids, list(self.cell.boxes))], return_counts=True)
+        if len(seen) == 0:
             return []
-        v, u = np.nonzero(frame.body_ids == ids[np.argmax(counts)])
-        return [SimpleNamespace(u=float(np.median(u)), v=float(np.median(v)),
-                                grasp_class=GraspClass.B)]
+        v, u = np.nonzero(ids == seen[np.argmax(counts)])
+        return [Grasp(float(np.median(u)), float(np.median(v)), "B")]
 
 
 def test_one_short_pick_succeeds(smoke_cfg):
-    from pipeline.robot.model import robot_config
+    from pipeline.controller.picker import RobotController
+    from pipeline.robot.model import Robot, robot_config
     from pipeline.world.cell import PickCell
-    from pipeline.world.trial import PickRunner
-    from pipeline.robot.model import Robot
+    from pipeline.world.trial import TrialRunner
 
     cfg = smoke_cfg("evaluate", "evaluate.boxes_per_trial=1", "eval_boxes=warehouse",
                     "eval_boxes.types=[{name: medium, size: [0.145, 0.092, 0.052]}]")
     cell = PickCell(cfg, lambda: Robot(robot_config(cfg)))
+    robot_side = RobotController(cfg, _Oracle(cell), "oracle")
     try:
-        runner = PickRunner(cfg, cell, _Oracle(cell), "oracle")
+        runner = TrialRunner(cfg, cell, robot_side, "oracle")
         result = runner.run_trial(0, np.random.default_rng(0), np.random.default_rng(1),
                                   keep_trace=True)
     finally:
         cell.close()
+        robot_side.close()
     assert result.boxes == 1
     assert [a.outcome for a in result.attempts] == ["success"], result.attempts
     assert result.end == "bin_empty" and result.picked == 1
@@ -88,8 +87,37 @@ def test_evaluate_rejects_unknown_planner(smoke_cfg):
     from pipeline.evaluate import evaluate
 
     cfg = smoke_cfg("evaluate", "evaluate.planners=[dcnn,magic]")
-    with pytest.raises(ValueError, match="magic"):
+    with pytest.raises(ValueError, match="unknown planner 'magic'"):
         evaluate(cfg)
+    with pytest.raises(ValueError, match="evaluate.split is 'train'"):
+        evaluate(smoke_cfg("evaluate", "evaluate.split=train"))
+    with pytest.raises(ValueError, match="evaluate.collision_model is 'oracle'"):
+        evaluate(smoke_cfg("evaluate", "evaluate.collision_model=oracle"))
+
+
+def test_the_splits_draw_disjoint_heaps():
+    """dev keeps the seed keys of every earlier evaluation (31, 37, 41); test's are others, so
+    trial t of test is never trial t of dev."""
+    from pipeline.world.trial import HEAP_STREAMS
+
+    assert HEAP_STREAMS["dev"] == (31, 37, 41)
+    assert not set(HEAP_STREAMS["dev"]) & set(HEAP_STREAMS["test"])
+
+
+def test_the_example_plugin_runs_a_short_closed_loop(smoke_cfg, monkeypatch):
+    """docs/examples/centroid_planner.py as a new user runs it: named in evaluate.planners,
+    imported from the repository's root; it picks in the smoke trial and its row is Table 3's."""
+    from pathlib import Path
+
+    from pipeline.evaluate import evaluate
+
+    root = Path(__file__).resolve().parents[1]
+    monkeypatch.chdir(root)
+    monkeypatch.syspath_prepend(str(root))
+    name = "docs.examples.centroid_planner:CentroidPlanner"
+    out = evaluate(smoke_cfg("evaluate", f"evaluate.planners=[{name}]", "evaluate.workers=1"))
+    (row,) = json.loads((out / "manifest.json").read_text())["metrics"]["table3"]
+    assert row["planner"] == name and row["attempts"] >= 1 and row["picked"] >= 1
 
 
 def test_a_no_grasp_end_logs_its_home_image(tmp_path):

@@ -262,17 +262,14 @@ def test_heaps_match_tinyrenderer():
 def test_closed_loop_frames_match_tinyrenderer():
     """Every frame the hand camera takes during a closed-loop trial (3 boxes, the training-free
     planarity planner), rendered both ways: the same classification as above."""
-    from pipeline.dexnet.planner import DexNetPlanner
-    from pipeline.robot.model import robot_config
-    from pipeline.world.cell import PickCell
-    from pipeline.world.trial import PickRunner
-    from pipeline.robot.model import Robot
+    from pipeline.controller.planning import DexNetStylePlanner
+    from pipeline.world.trial import make_runner
 
     cfg = compose("evaluate", ["experiment=default", "evaluate.boxes_per_trial=3",
                                "evaluate.dexnet_variant=planarity"])
-    cell = PickCell(cfg, lambda: Robot(robot_config(cfg)))
-    dex = DexNetPlanner.from_config(cfg, "planarity", cell.robot.home_camera_pose())
-    runner = PickRunner(cfg, cell, lambda d, i, rng: dex.plan(d, i, rng=rng), "dexnet")
+    runner = make_runner(cfg, "dexnet", lambda cell: DexNetStylePlanner(
+        cfg, "planarity", cell.robot.home_camera_pose(), None))
+    cell = runner.cell
     totals = {"frames": 0, "pixels": 0, "bin_tie": 0, "edge_tie": 0, "depth_edge_tie": 0,
               "crack": 0, "near_plane": 0, "unexplained": [], "depth_max_m": 0.0}
     render = cell.render
@@ -299,6 +296,7 @@ def test_closed_loop_frames_match_tinyrenderer():
                          np.random.default_rng([2024, 37, 0]))
     finally:
         cell.close()
+        runner.robot_side.close()
     print(totals)
     assert totals["frames"] >= 20
     assert totals["unexplained"] == []

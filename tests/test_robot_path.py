@@ -166,16 +166,15 @@ def test_a_servo_that_sweeps_a_wall_is_rejected(smoke_cfg):
     from pipeline.camera.geometry import project, world_to_camera
     from pipeline.controller.grasp_check import check_grasp
     from pipeline.robot.model import robot_config
-    from pipeline.world.cell import PickCell
-    from pipeline.world.trial import PickRunner, paper_x_axis
+    from pipeline.controller.check import paper_x_axis
     from pipeline.robot.model import Robot
-    from pipeline.servo.descriptor import describe_surface
+    from pipeline.servo.descriptor import describe_surface, descriptor_config
+    from pipeline.world.cell import PickCell
 
     cfg = smoke_cfg("evaluate", "evaluate.boxes_per_trial=1",
                     "eval_boxes.types=[{name: square, size: [0.09, 0.09, 0.035]}]")
     cell = PickCell(cfg, lambda: Robot(robot_config(cfg)))
     try:
-        runner = PickRunner(cfg, cell, None, "test")
         cell.reset(np.random.default_rng(0), 1)
         (body,) = list(cell.boxes)
         p.resetBasePositionAndOrientation(
@@ -186,7 +185,7 @@ def test_a_servo_that_sweeps_a_wall_is_rejected(smoke_cfg):
         top = np.asarray(cell.box_pose(body)[0]) + [0, 0, 0.045]
         u, v = project(world_to_camera(top, frame.T_world_cam), cell.intrinsics)
         feats, _ = describe_surface(frame.depth_m, cell.intrinsics, np.array([u, v]),
-                                    runner.descriptor_cfg)
+                                    descriptor_config(cfg))
 
         def check(path_check, rotations, obstacles):
             cfg.robot.path_check, cfg.hand.rotations_deg = path_check, rotations

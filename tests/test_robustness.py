@@ -95,7 +95,9 @@ def test_bad_variant_model_is_refused_before_any_work(tmp_path):
 def test_closed_loop_sensor_stream_keeps_the_heaps():
     """With sensor=sr300 the evaluation's heaps are the noise-free run's: the sensor draws
     from its own stream (seed, 41, trial), not from the heap's or the plans' generators."""
-    from pipeline.evaluate import HEAP_SEED
+    from pipeline.world.trial import HEAP_STREAMS
+
+    HEAP_SEED = HEAP_STREAMS["dev"][0]
     from pipeline.robot.model import robot_config
     from pipeline.world.cell import PickCell
     from pipeline.robot.model import Robot

@@ -261,6 +261,7 @@ class LabelConfig:
 
     generate_version: str = MISSING
     robot_checks: bool = MISSING  # robot-level labels (IK, joint limits, collisions)
+    single_cup_fallback: bool = MISSING  # a B the robot cannot take is labelled L or R if one can
     workers: int = MISSING  # 0 = all cores; does not change the artifact
     force: bool = MISSING
 
@@ -453,10 +454,22 @@ class ServoSchema:
 
 
 @dataclass
+class HeapModelSchema:
+    """The robot's heap model from depth (``pipeline.controller.heap_model``), metres."""
+
+    cell_m: float = MISSING  # grid cell side (and the robot's surface points' spacing)
+    bin_tolerance_m: float = MISSING  # points this near the bin's floor or inner walls are the bin
+
+
+@dataclass
 class EvaluateConfig:
     """The closed-loop evaluation stage (``pipeline.evaluate``)."""
 
-    planners: List[str] = MISSING
+    planners: List[str] = MISSING  # built-in names, or plug-ins (package.module:Class, entry points)
+    split: str = MISSING  # dev | test: which stream of heaps (docs/closed_loop.md, "Splits")
+    # what the run-time check knows of the heap: observed (its depth image) | truth (ablation)
+    collision_model: str = MISSING
+    heap_model: HeapModelSchema = field(default_factory=HeapModelSchema)
     dexnet_variant: str = MISSING  # gqcnn | gqcnn_ood | planarity (a baseline variant)
     dexnet_pattern: str = MISSING  # the cup that serves Dex-Net's single suction point
     dcnn_threshold: Optional[float] = MISSING  # th of Eq. 3 for the closed loop; None: the model's
@@ -468,13 +481,12 @@ class EvaluateConfig:
     preferred_bin_clearance: Optional[float] = MISSING
     retry_policy: str = MISSING  # "skip_failed" | "repeat" (the plain protocol)
     retry_same_point_m: float = MISSING
-    retry_moved_m: float = MISSING
-    retry_moved_deg: float = MISSING
-    retry_neighbour_m: float = MISSING  # boxes this near the failed point are its surroundings
+    retry_neighbour_m: float = MISSING  # m: the heap this near the failed point is its surroundings
+    retry_depth_change_m: float = MISSING  # m: a larger depth change is a change
+    retry_changed_area_m2: float = MISSING  # m²: this much changed area near the point: changed
     # after these outcomes every pattern at the failed point is skipped, not only the failed one
     retry_point_outcomes: List[str] = MISSING
     face_split_m: float = MISSING  # split the home region at other planner points this far away
-    # m: the servo's tracked plane may move this far between frames; None: its normal only
     check_hand_fit: bool = MISSING  # the run-time check tests the pattern's cups on the surface
     single_cup_fallback: bool = MISSING  # a rejected B is tried with L, then R
     min_area_ratio: float = MISSING  # 0: off (paper); 1.2: Sec. 8.4's surface-area safety check
@@ -497,6 +509,9 @@ class ClosedLoopVariant:
 
     name: str = MISSING
     model: str = MISSING  # clean | noisy: the network trained on ideal / on the sensor's depth
+    # dev: robustness.closed_loop_trials trials on the dev heaps; test: evaluate.num_trials on
+    # the test heaps (the headline row)
+    split: str = MISSING
     overrides: List[str] = MISSING
 
 

@@ -24,7 +24,7 @@ import numpy as np
 from pipeline.config.build import from_section
 from pipeline.dataset.scenes import Box, Scene
 from pipeline.dexnet.contact import SuctionModelConfig, suction_model_config
-from pipeline.labelling.hand import hand_label
+from pipeline.labelling.hand import camera_centre, hand_label
 from pipeline.labelling.surfaces import (
     SurfaceDetectionConfig, detect_surfaces, match_surfaces, true_visible_faces,
 )
@@ -60,6 +60,34 @@ def pattern_holds(surface: Surface, hl: HandLabel, box: Box, T_world_cam: np.nda
     mass = suction.density * float(np.prod(box.size))
     return hold_test(mass, box.T_cam_box[:3, 3], points, -n, gravity_cam, suction,
                      cup_offset).ok
+
+
+def single_cup_order(surface: Surface, hl: HandLabel, hand_cfg) -> tuple[GraspClass, ...]:
+    """The single-cup patterns a hand-level B falls back on, in the hand-level rule's order
+    (``pipeline.labelling.hand``, step 4: the pattern whose camera centre is higher first, L
+    within ``tie_tolerance``); () for a class other than B."""
+    if hl.grasp_class != GraspClass.B:
+        return ()
+    z_l, z_r = (camera_centre(surface, hl.x_axis_cam, c, hand_cfg)[2]
+                for c in (GraspClass.L, GraspClass.R))
+    if z_r < z_l - hand_cfg.tie_tolerance:
+        return GraspClass.R, GraspClass.L
+    return GraspClass.L, GraspClass.R
+
+
+def robot_level_class(hl: HandLabel, check, holds, fallback=()) -> tuple[GraspClass, str]:
+    """(the robot-level class, the NG reason or ""): ``hl``'s class when ``check(hl)`` (the
+    robot-level check: None or an NG reason) passes; else the first of ``fallback`` (single-cup
+    classes, ``single_cup_order``) whose label ``holds`` the box (``holds(label)``) and passes
+    ``check``; else NG with the first check's reason."""
+    first = check(hl)
+    if not first:
+        return hl.grasp_class, ""
+    for cls in fallback:
+        one = dataclasses.replace(hl, grasp_class=cls)
+        if holds(one) and not check(one):
+            return cls, ""
+    return GraspClass.NG, first
 
 
 def label_scene(scene: Scene, cfg, robot=None, bin_cfg=None, density: float | None = None
@@ -105,9 +133,13 @@ def label_scene(scene: Scene, cfg, robot=None, bin_cfg=None, density: float | No
             hl = dataclasses.replace(hl, grasp_class=GraspClass.NG, reason="hold")
         final, reason = hl.grasp_class, hl.reason or ""
         if robot is not None and final != GraspClass.NG:
-            reason = robot.check(s, hl, cfg.hand) or ""
-            if reason:
-                final = GraspClass.NG
+            box = scene.boxes[s.instance - 1]
+            final, reason = robot_level_class(
+                hl, lambda h: robot.check(s, h, cfg.hand),
+                lambda h: suction is None or pattern_holds(
+                    s, h, box, scene.T_world_cam, suction, float(cfg.hand.cup_offset)),
+                single_cup_order(s, hl, cfg.hand) if bool(cfg.label.single_cup_fallback)
+                else ())
         rows.append((s, hl, final, reason))
     t2 = time.perf_counter()
 

@@ -3,7 +3,8 @@ robustness artifact (``data/robustness/<version>``, ``report.robustness_version`
 ``pipeline.robustness``), read from its ``robustness.json``.
 
 Tables ``robustness_sensor_model``, ``robustness_table1`` / ``robustness_table2`` (Tables 1 and
-2 per network and input), ``robustness_closed_loop`` (the closed-loop variants),
+2 per network and input), ``robustness_closed_loop`` (the closed-loop variants, each on its split:
+success rate and boxes picked with their 95 % intervals, failures, trial ends, why no attempt),
 ``robustness_policies`` (Sec. 8.4's policies against the paper's) and ``robustness_failures``.
 Figure ``robustness_depth.png``: the ideal, sensor-model and filtered depth of the first test
 image of the study's noisy generation artifact (its ``artifacts.generate_noisy``), when that
@@ -26,7 +27,10 @@ from pipeline.cli import CONF_DIR
 from pipeline.report.baseline import TABLE2_SECTION
 from pipeline.report.figures import figure_sensor_depth
 from pipeline.report.section import Context, Section
-from pipeline.report.tables import Table, integer, number, times, within_key
+from pipeline.report.tables import (
+    Column, Table, book_columns, count_column, end_columns, failure_columns, integer, number,
+    pph_column, reason_column, table_of, text_column, times, within_key,
+)
 from pipeline.report.training import TABLE1_COLUMNS, TABLE1_SECTION
 from pipeline.report.upstream import ArtifactInfo, resolve_upstream
 
@@ -144,52 +148,46 @@ def robustness_table2_table(info: RobustnessInfo) -> Table:
                  csv_formats=["", "", "{}", "{:.4f}", "{}", "{:.3f}"], text_columns=2)
 
 
-def _ratio(num: Any, den: Any) -> str | None:
-    a, b = integer(num), integer(den)
-    return None if a is None or b is None else f"{a}/{b}"
-
-
-def _closed_loop_row(r: dict) -> list[Any]:
-    return [str(r.get("variant")), MODEL_LABELS.get(str(r.get("model")), str(r.get("model"))),
-            str(r.get("overrides") or "-"), times(r.get("success_rate")),
-            _ratio(r.get("successes"), r.get("attempts")),
-            _ratio(r.get("picked"), r.get("boxes")),
-            number(r.get("pph_motion"))]
-
-
-CLOSED_LOOP_HEADERS = ["variant", "network", "overrides", "success rate",
-                       "successes / attempts", "picked / boxes", "PPH (motion only)"]
+def closed_loop_columns() -> list[Column]:
+    """The closed-loop variants' columns: the variant, its network, overrides, split and
+    trials, success rate and boxes picked with their 95 % intervals, PPH, failures by kind, how
+    the trials ended, and why a variant made no attempt."""
+    return [text_column("variant", "variant"),
+            Column("network", lambda r: MODEL_LABELS.get(str(r.get("model")),
+                                                         str(r.get("model")))),
+            Column("overrides", lambda r: str(r.get("overrides") or "-")),
+            text_column("split", "split"), count_column("trials", "trials"),
+            *book_columns(), pph_column(), *failure_columns(), *end_columns(), reason_column()]
 
 
 def robustness_closed_loop_table(info: RobustnessInfo) -> Table:
     """The closed-loop variants of the sensor study (group ``sensor``)."""
-    rows = [_closed_loop_row(r) for r in info.data["closed_loop"] if r.get("group") == "sensor"]
-    return Table("robustness_closed_loop", CLOSED_LOOP_HEADERS, rows,
-                 ["", "", "", "{:.1f} %", "", "", "{:.1f}"],
-                 csv_formats=["", "", "", "{:.4f}", "", "", "{:.1f}"], text_columns=3)
+    rows = [r for r in info.data["closed_loop"] if r.get("group") == "sensor"]
+    return table_of("robustness_closed_loop", closed_loop_columns(), rows, text_columns=3)
+
+
+def _versus(r: dict, ref: dict | None, key: str, factor: float) -> float | None:
+    """Row ``r``'s ``key`` minus the reference row's, times ``factor``; None for the reference
+    itself and where either is missing."""
+    if ref is None or r is ref:
+        return None
+    a, b = number(r.get(key)), number(ref.get(key))
+    return None if a is None or b is None else factor * (a - b)
 
 
 def robustness_policies_table(info: RobustnessInfo) -> Table:
     """Sec. 8.4's policies (group ``policy``), with the change in success rate (percentage
-    points) and PPH against the ``paper`` row; that row itself shows none."""
+    points) and PPH against the ``paper`` row (that row itself shows none), before the
+    no-attempt reason."""
     policy = [r for r in info.data["closed_loop"] if r.get("group") == "policy"]
     ref = next((r for r in policy if r.get("variant") == REFERENCE_POLICY), None)
-    ref_rate = times(ref.get("success_rate")) if ref is not None else None
-    ref_pph = number(ref.get("pph_motion")) if ref is not None else None
-    rows = []
-    for r in policy:
-        row = _closed_loop_row(r)
-        rate, pph = row[3], row[6]
-        own = r is ref
-        row += [None if own or rate is None or ref_rate is None else rate - ref_rate,
-                None if own or pph is None or ref_pph is None else pph - ref_pph]
-        rows.append(row)
-    headers = CLOSED_LOOP_HEADERS + [f"success rate vs. {REFERENCE_POLICY} (pp)",
-                                     f"PPH vs. {REFERENCE_POLICY}"]
-    return Table("robustness_policies", headers, rows,
-                 ["", "", "", "{:.1f} %", "", "", "{:.1f}", "{:+.1f}", "{:+.1f}"],
-                 csv_formats=["", "", "", "{:.4f}", "", "", "{:.1f}", "{:.4f}", "{:.1f}"],
-                 text_columns=3)
+    *columns, reason = closed_loop_columns()
+    columns += [
+        Column(f"success rate vs. {REFERENCE_POLICY} (pp)",
+               lambda r: _versus(r, ref, "success_rate", 100.0), "{:+.1f}", csv_fmt="{:.4f}"),
+        Column(f"PPH vs. {REFERENCE_POLICY}", lambda r: _versus(r, ref, "pph_motion", 1.0),
+               "{:+.1f}", csv_fmt="{:.1f}"), reason]
+    return table_of("robustness_policies", columns, policy, text_columns=3)
 
 
 def robustness_failures_table(info: RobustnessInfo) -> Table:
@@ -239,6 +237,39 @@ def missing_figure_note(info: RobustnessInfo) -> str:
            "recreates it, then the report)."))
 
 
+def _closed_loop_note(rows: list[dict], trials: Any) -> str:
+    """What the closed-loop variants are and which heaps they ran on: per split (``dev``,
+    ``test``), its variants' trials; ``trials`` (the config's ``closed_loop_trials``) for an
+    artifact made before the splits."""
+    head = "The closed-loop variants are ordinary evaluation artifacts of the DCNN planner"
+    splits = {r.get("split") for r in rows}
+    if splits <= {None}:
+        return (head + (f" ({trials} trial{'' if trials == 1 else 's'} each)"
+                        if trials is not None else "")
+                + ", all on the same heaps and seeds; they differ only in the overrides shown.")
+
+    def part(split: str) -> tuple[list[str], str]:
+        """The split's variants and their trials ("1 trial each"; "" where none is known)."""
+        mine = [r for r in rows if r.get("split") == split]
+        counts = sorted({integer(r.get("trials")) for r in mine} - {None})
+        each = (f"{' or '.join(str(n) for n in counts)} trial{'' if counts == [1] else 's'} each"
+                if counts else "")
+        return [f"`{r.get('variant')}`" for r in mine], each
+
+    out = [head + ", each on one split of the evaluation's heaps (its `split` column)."]
+    dev, each = part("dev")
+    if dev:
+        out.append(f"The {len(dev)} dev variants" + (f" ({each})" if each else "")
+                   + " share the heaps development used and differ only in the overrides "
+                   "shown: they compare the variants.")
+    test, each = part("test")
+    if test:
+        out.append(f"The test variants ({', '.join(test)}" + (f"; {each}" if each else "")
+                   + ") run on Table 3's test heaps, which nothing is chosen on: the headline "
+                   "figures on this sensor.")
+    return " ".join(out)
+
+
 def render_robustness(info: RobustnessInfo | None, tables: dict[str, Table],
                       figure: str | None, figure_note: str | None = None) -> list[str]:
     """README lines of the robustness section (``figure``: the depth figure, if drawn;
@@ -252,7 +283,6 @@ def render_robustness(info: RobustnessInfo | None, tables: dict[str, Table],
     arts = data["artifacts"]
     inputs = list(dict.fromkeys(str(r.get("input")) for r in data["table1"] + data["table2"]))
     images = sorted({integer(r.get("images")) for r in data["table1"]} - {None})
-    trials = cfg.get("closed_loop_trials")
     out += [
         f"Robustness artifact `{info.version}` (`python -m pipeline.robustness`): the method on "
         f"depth from the `{sensor}` sensor model instead of the ideal rendered depth, with a "
@@ -263,9 +293,7 @@ def render_robustness(info: RobustnessInfo | None, tables: dict[str, Table],
         + (f" ({', '.join(str(n) for n in images)} images)" if images else "")
         + ", the same heaps as the clean one; the labels come from the ideal depth, so they "
         "are the same for every input. Inputs: " + "; ".join(_input_meaning(n) for n in inputs)
-        + ". The closed-loop variants are ordinary evaluation artifacts of the DCNN planner"
-        + (f" ({trials} trial{'' if trials == 1 else 's'} each)" if trials is not None else "")
-        + ", all on the same heaps and seeds; they differ only in the overrides shown.",
+        + ". " + _closed_loop_note(data["closed_loop"], cfg.get("closed_loop_trials")),
         "",
         "### Sensor model",
         "",
@@ -295,15 +323,20 @@ def render_robustness(info: RobustnessInfo | None, tables: dict[str, Table],
         tables["robustness_table2"].markdown(),
         "### Sensor noise: closed loop",
         "",
-        "Success rate = successful grasps / attempts; PPH = successful picks per hour of "
-        "simulated robot motion (as in Table 3).",
+        "As in Table 3: success rate = successful grasps / attempts, boxes picked = boxes "
+        "taken out / boxes dropped in, both with their Wilson 95 % score interval in brackets; "
+        "PPH = successful picks per hour of simulated robot motion (what that time leaves out: "
+        "Table 3's section); how the trials ended and the failed attempts by kind. A variant "
+        "with no attempt says why in its last column (how its trials ended; for \"no grasp\", "
+        "the planner's candidates and what rejected them).",
         "",
         tables["robustness_closed_loop"].markdown(),
         "### Sec. 8.4 failure cases: closed loop",
         "",
         "The paper's proposed fixes of its failure cases on ideal depth, each against the "
-        f"paper's policy (the `{REFERENCE_POLICY}` row): differences in success rate are "
-        "percentage points, in PPH picks per hour.",
+        f"paper's policy (the `{REFERENCE_POLICY}` row, on the same heaps): differences in "
+        "success rate are percentage points, in PPH picks per hour; the columns are the closed "
+        "loop table's.",
         "",
         tables["robustness_policies"].markdown(),
         "Failed attempts by kind (see Table 3's list):",

@@ -1,4 +1,4 @@
-"""The simulated picking cell of the closed-loop evaluation (paper Fig. 1a, Sec. 6).
+"""The simulated picking cell of the closed-loop evaluation (paper Fig. 1a, Sec. 6): the world.
 
 One headless pybullet world holds the ground, the bin (``pipeline.simulation.heap``), the robot
 with its two-cup hand and eye-in-hand depth camera (``pipeline.robot``), and a heap of boxes
@@ -20,10 +20,10 @@ import numpy as np
 import pybullet as p
 
 from pipeline.camera.geometry import Intrinsics
-from pipeline.camera.depth_filter import preprocess_depth
 from pipeline.camera.render import render_depth
 from pipeline.camera.sensor import apply_sensor_model
 from pipeline.cell.bin import build_cell
+from pipeline.controller.observation import Observation
 from pipeline.simulation.heap import drop_heap, settle
 
 _PARKED = [0.0, 0.0, -50.0]  # where the robot waits while the camera renders
@@ -31,9 +31,10 @@ _PARKED = [0.0, 0.0, -50.0]  # where the robot waits while the camera renders
 
 @dataclass
 class Frame:
-    """One camera image. ``depth_m``: (H, W) float32 metres, 0 = no data, as the sensor returns
-    it and preprocessed; ``body_ids``: (H, W) int32 pybullet body per pixel (−1 none);
-    ``T_world_cam``: (4, 4) camera pose; ``depth_clean_m``: the renderer's ideal depth."""
+    """One camera image with the world's truth. ``depth_m``: (H, W) float32 metres, 0 = no
+    data, as the sensor returns it (what the robot gets); ``body_ids``: (H, W) int32 pybullet
+    body per pixel (−1 none); ``T_world_cam``: (4, 4) camera pose; ``depth_clean_m``: the
+    renderer's ideal depth."""
 
     depth_m: np.ndarray
     body_ids: np.ndarray
@@ -53,6 +54,7 @@ class PickCell:
         self.boxes: dict[int, dict] = {}  # body id → {"mass", "size", "type"}
         self.cell_ids: list[int] = []
         self.sensor_rng: np.random.Generator | None = None  # draws of cfg.sensor's model
+        self.last_frame: Frame | None = None  # the truth behind the latest observation
 
     def reset(self, rng: np.random.Generator, count: int) -> None:
         """New world: the cell, ``count`` boxes of ``eval_boxes`` dropped and settled, the robot
@@ -96,9 +98,16 @@ class PickCell:
                 raise ValueError("PickCell.sensor_rng is not set: a sensor model needs a "
                                  "generator (PickRunner.run_trial's rng_sensor)")
             depth = apply_sensor_model(depth, self.cfg.sensor, self.sensor_rng, self.intrinsics)
-        # preprocessing before planning and servoing (pipeline.camera.depth_filter)
-        depth = preprocess_depth(depth, self.cfg.depth_filter)
         return Frame(depth, frame.body_ids, T, frame.depth_m)
+
+    def observe(self) -> Observation:
+        """What the robot gets from the hand camera now (``pipeline.controller.observation``):
+        the sensor's depth, the intrinsics, the camera pose and the joint state. The truth
+        behind it (body ids, ideal depth) stays here, in ``last_frame``."""
+        frame = self.render()
+        self.last_frame = frame
+        return Observation(frame.depth_m, self.intrinsics, frame.T_world_cam,
+                           self.robot.joints())
 
     def step(self, seconds: float) -> None:
         """Advance the physics by ``seconds`` (rounded to whole time steps, at least one)."""

@@ -15,20 +15,20 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.camera.geometry import Intrinsics, pose_matrix
+from pipeline.controller.observation import Observation
+from pipeline.controller.planning import Grasp
 from pipeline.dataset.scenes import Box, Scene
 from pipeline.labelling.types import GraspClass
 from pipeline.world.cell import Frame, PickCell
 from pipeline.planner.decode import GraspPrediction
-from pipeline.planner.ranking import GraspCandidate, rank_grasps
+from pipeline.planner.ranking import rank_grasps
 
 
 class OraclePlanner:
-    """``planner(depth_m, intrinsics, rng, frame=...)`` → ranked ``GraspCandidate`` list.
-
-    ``wants_frame``: the closed loop passes the home ``Frame`` (ideal depth, body ids, pose).
-    """
-
-    wants_frame = True
+    """``plan(observation, rng)`` → ranked grasps (``pipeline.controller.planning``), from the
+    truth behind the observation: the cell's ``last_frame`` (ideal depth, body ids, pose) and
+    its true box poses. The one planner that plans from ground truth; its grasps go through the
+    robot's own selection and check like any planner's."""
 
     def __init__(self, cfg, cell: PickCell) -> None:
         from pipeline.labelling.robot_check import RobotChecker
@@ -53,12 +53,15 @@ class OraclePlanner:
                      boxes=boxes, intrinsics=intr, T_world_cam=frame.T_world_cam, split="",
                      index=0, seed=(0, 0, 0), settle_steps=0, settled=True)
 
-    def __call__(self, depth_m: np.ndarray, intrinsics: Intrinsics, rng=None,
-                 frame: Frame | None = None) -> list[GraspCandidate]:
-        if frame is None:
-            raise ValueError("the oracle planner needs the home frame (PickRunner passes it)")
+    def plan(self, observation: Observation, rng=None) -> list[Grasp]:
+        """The labels of the home frame behind ``observation`` as grasps, ranked by Eq. 7."""
         from pipeline.labelling.scene import label_scene
 
+        frame = self.cell.last_frame
+        if frame is None or not np.array_equal(frame.T_world_cam, observation.T_world_cam):
+            raise ValueError("the oracle planner plans on the cell's latest observation "
+                             "(PickCell.observe), and this observation is not it")
+        intrinsics = observation.intrinsics
         scene = self.scene(frame, intrinsics)
         rows, _, _, _ = label_scene(scene, self.cfg, self.robot, self.cfg.bin,
                                     density=float(self.cfg.eval_boxes.density))
@@ -71,4 +74,6 @@ class OraclePlanner:
             preds.append(GraspPrediction(u=float(uv[0]), v=float(uv[1]),
                                          grasp_class=GraspClass(int(cls)), probability=1.0,
                                          class_probs=probs))
-        return rank_grasps(preds, frame.depth_clean_m, intrinsics, self.ranking)
+        ranked = rank_grasps(preds, frame.depth_clean_m, intrinsics, self.ranking)
+        return [Grasp(u=float(c.u), v=float(c.v), pattern=c.grasp_class.name,
+                      score=float(c.score)) for c in ranked]
