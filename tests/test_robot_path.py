@@ -203,3 +203,40 @@ def test_a_servo_that_sweeps_a_wall_is_rejected(smoke_cfg):
         assert turned.reason is None and abs(turned.x_world[1]) > 0.99
     finally:
         cell.close()
+
+
+def test_the_final_press_is_checked_by_hand():
+    """The camera looking straight down from 0.3 m over the bin centre; the closed loop's final
+    press moves it d* − CUP_TIP_Z + press_depth = 0.15 − 0.14 + 0.003 = 13 mm down its axis.
+    A 20 × 10 × 4 mm slab under the camera body between the cups (x 30–50 mm, |y| ≤ 5 mm),
+    its top at 0.294 m: 6 mm below the camera at the grasp pose (clear of the 5 mm margin), in
+    the camera's way 7 mm before the press ends: "press". The slab 20 mm lower is clear."""
+    from conftest import composed
+    from pipeline.controller.grasp_check import _press_reason
+    from pipeline.robot.model import Robot, robot_config
+
+    cfg = composed()
+    client = p.connect(p.DIRECT)
+    try:
+        robot = Robot(robot_config(cfg))
+        robot.load(client)
+        T = np.eye(4)
+        T[:3, :3] = [[1.0, 0, 0], [0, -1.0, 0], [0, 0, -1.0]]  # looking down, x along world x
+        T[:3, 3] = [0.0, 0.0, 0.3]
+        res = robot.solve_ik(T, seed_q=robot.home_q())
+        assert res.ok
+
+        def slab(top):
+            col = p.createCollisionShape(p.GEOM_BOX, halfExtents=[0.01, 0.005, 0.002],
+                                         physicsClientId=client)
+            return p.createMultiBody(0.0, col, basePosition=[0.04, 0.0, top - 0.002],
+                                     physicsClientId=client)
+
+        near = slab(0.294)
+        assert robot.in_collision(res.q, [near], self_collision=False) == []
+        assert _press_reason(robot, T, res.q, cfg.hand, cfg, [near]) == "press"
+        p.removeBody(near, physicsClientId=client)
+        low = slab(0.274)
+        assert _press_reason(robot, T, res.q, cfg.hand, cfg, [low]) is None
+    finally:
+        p.disconnect(client)

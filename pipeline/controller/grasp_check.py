@@ -33,6 +33,7 @@ from pipeline.robot.approach import first_goal
 from pipeline.robot.model import Robot
 from pipeline.robot.path import check_motion, path_config
 from pipeline.robot.target_pose import hand_rotations, rotate_about, target_camera_pose
+from pipeline.robot.urdf_builder import CUP_TIP_Z
 from pipeline.servo.control import servo_config
 from pipeline.servo.predict import servo_motion
 
@@ -42,8 +43,9 @@ class GraspCheck(NamedTuple):
 
     Attributes:
         reason: None when the robot can take the grasp, else the failed check: "ik",
-            "joint_limits", "collision" (the grasp pose), "path_timeout",
-            "path_joint_limits", "path_lost" (the predicted servo) or "path_collision".
+            "joint_limits", "collision" (the grasp pose), "press" (the final press along the
+            camera's axis touches the bin), "path_timeout", "path_joint_limits", "path_lost"
+            (the predicted servo) or "path_collision".
         x_world: (3,) the hand's X axis in the world of the rotation that passed (else None).
         path: the predicted servo's camera poses (4, 4) from home, one per control period, of
             the rotation that passed (None without ``robot.path_check``).
@@ -64,7 +66,8 @@ def check_grasp(robot: Robot, cfg, hand_cfg, T_world_cam: np.ndarray, centre_cam
     camera pose (the active cup on ``centre_cam``, d* along ``normal_cam``, camera X along
     ``x_axis_cam`` turned by the rotation; home camera frame, metres) must be reached by IK
     from home, in the joint limits, clear of ``obstacle_ids`` except ``ignore_body_ids``
-    (:meth:`Robot.solve_ik`). With ``robot.path_check``, so must the motion to it: the 2.5D
+    (:meth:`Robot.solve_ik`), and the final press from it along the camera's axis must end
+    clear of the bin with every link but the cups (:func:`_press_reason`). With ``robot.path_check``, so must the motion to it: the 2.5D
     VS from home through ``motion.approach``'s first goal to that pose, predicted on the exact
     surface (``centre_cam``, ``normal_cam``, axes ``long_cam``, ``short_cam``;
     :func:`pipeline.servo.predict.servo_motion`), must converge within ``servo.timeout_s``
@@ -96,6 +99,8 @@ def check_grasp(robot: Robot, cfg, hand_cfg, T_world_cam: np.ndarray, centre_cam
             res = robot.solve_ik(grasp, seed_q=home, obstacle_ids=obstacle_ids,
                                  ignore_body_ids=ignore_body_ids)
             reason, poses = res.reason, None
+            if reason is None:
+                reason = _press_reason(robot, grasp, res.q, hand_cfg, cfg, bin_ids)
             if reason is None and path_cfg is not None:
                 reason, poses = _path_reason(robot, cfg, home, T_world_cam, centre_cam,
                                              normal_cam, long_cam, short_cam, x_rot,
@@ -107,6 +112,24 @@ def check_grasp(robot: Robot, cfg, hand_cfg, T_world_cam: np.ndarray, centre_cam
     finally:
         robot.set_joints(home)
     return GraspCheck(first, None, None)
+
+
+def _press_reason(robot, grasp: np.ndarray, q_grasp: np.ndarray, hand_cfg, cfg,
+                  bin_ids) -> str | None:
+    """None when the final press (from the grasp pose ``grasp``, (4, 4) world, along the camera's
+    axis until the lips touch the surface and press ``motion.press_depth``) ends clear of the
+    bin ``bin_ids`` with every link but the cups, which are meant to touch; else "press". The
+    closed loop judges that approach so (a protective stop), and a grasp pose that clears a wall
+    by the margin can still reach it along a tilted axis."""
+    travel = float(hand_cfg.standoff) - CUP_TIP_Z + float(cfg.motion.press_depth)
+    pressed = grasp.copy()
+    pressed[:3, 3] += travel * grasp[:3, 2]
+    res = robot.solve_ik(pressed, seed_q=q_grasp, obstacle_ids=())
+    if res.reason is not None:
+        return "press"
+    hits = [c for c in robot.in_collision(res.q, list(bin_ids), self_collision=False)
+            if not c.robot_link.startswith("cup")]
+    return "press" if hits else None
 
 
 def _path_reason(robot, cfg, home, T_world_cam, centre_cam, normal_cam, long_cam, short_cam,

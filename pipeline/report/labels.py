@@ -35,7 +35,7 @@ LABEL_FIGURE = "figures/labels_sample.png"
 NG_REASON_LEVEL = {"too_small": "hand", "center_occluded": "hand", "ik": "robot",
                    "joint_limits": "robot", "collision": "robot", "path_collision": "robot",
                    "path_joint_limits": "robot", "path_timeout": "robot", "path_lost": "robot",
-                   "hold": "hand"}
+                   "hold": "hand", "press": "robot"}
 NG_REASON_MEANING = {
     "too_small": "the cups do not fit on the visible surface",
     "center_occluded": "the centre of the visible region lies on another box",
@@ -50,6 +50,8 @@ NG_REASON_MEANING = {
                     "in time",
     "path_lost": "the servo from home, predicted on the exact surface, loses sight of it",
     "hold": "the cups fit, but would not hold the box's weight (hold test; hand.hold_check)",
+    "press": "the pose is clear, but the final press along the camera's axis brings the hand "
+             "or the arm onto the bin",
 }
 # (manifest key, column header, Markdown format) of the surface-accuracy table.
 ACCURACY_COLUMNS = (
