@@ -131,7 +131,8 @@ def _memory(**kw):
 
     ev = SimpleNamespace(retry_policy="skip_failed", retry_same_point_m=0.03,
                          retry_neighbour_m=0.15, retry_depth_change_m=0.005,
-                         retry_changed_area_m2=0.0005, retry_point_outcomes=["no_seal"])
+                         retry_changed_area_m2=0.0005, retry_point_outcomes=["no_seal"],
+                         retry_drop_single_cup=True)
     return RetryMemory(SimpleNamespace(**{**vars(ev), **kw}))
 
 
@@ -163,6 +164,24 @@ def test_the_retry_memory_sees_the_heap_change_by_hand():
     mem.remember(then, P, "B", "no_seal")
     assert mem.repeats(then, P, "L") and mem.repeats(then, P, "R")
     assert not _memory(retry_policy="repeat").repeats(then, P, "B")
+
+
+def test_a_box_one_cup_dropped_keeps_its_single_cups_skipped():
+    """An L dropped the box at P: on the same image L and R near P are repeats, B is not; once
+    a neighbour 10 cm away has moved in (36 cm² changed), L and R at P stay skipped (the box is
+    as heavy as it was), a point 5 cm away is new; with the rule off, L is a new plan then."""
+    box = ((0.0, 0.0, 0.026), (0.145, 0.092, 0.052))
+    then = observe([box])
+    changed = observe([box, ((0.0, 0.1, 0.03), (0.06, 0.06, 0.06))])
+    P = np.array([0.0, 0.0, 0.052])
+    for rule, after in ((True, True), (False, False)):
+        mem = _memory(retry_drop_single_cup=rule)
+        mem.remember(then, P, "L", "dropped")
+        assert mem.repeats(then, P, "L") and mem.repeats(then, P, "R") == rule
+        assert not mem.repeats(then, P, "B")
+        assert mem.repeats(changed, P + [0.01, 0, 0], "L") == after
+        assert mem.repeats(changed, P, "R") == after
+        assert not mem.repeats(changed, P + [0.05, 0, 0], "L")
 
 
 # ------------------------------------------------------------------------------ decisions

@@ -264,8 +264,13 @@ def test_single_point_tries_the_other_cup(runner):
     plan = _select(runner, obs, [g]).plan
     assert plan.pattern == "L"
     np.testing.assert_allclose(plan.fixed_point_world, [0, 0, 0.052], atol=1e-6)
-    _fail(runner, obs, g, "L")
+    _fail(runner, obs, g, "L", "collision")
     assert _select(runner, obs, [g]).plan.pattern == "R"
+    # one cup dropped the box there: the other single cup is skipped too
+    # (evaluate.retry_drop_single_cup)
+    runner.robot_side.memory.clear()
+    _fail(runner, obs, g, "L", "dropped")
+    assert _select(runner, obs, [g]).plan is None
 
 
 def test_a_b_that_does_not_fit_is_tried_with_one_cup(cube_runner):
@@ -281,7 +286,7 @@ def test_a_b_that_does_not_fit_is_tried_with_one_cup(cube_runner):
     assert runner.robot_side.patterns(g) == ["B", "L", "R"]
     result = _select(runner, obs, [g])
     assert result.plan.pattern == "L" and result.rejected == {"hand_fit": 1}
-    _fail(runner, obs, g, "L")
+    _fail(runner, obs, g, "L", "collision")
     assert _select(runner, obs, [g]).plan.pattern == "R"
     # an L or R candidate has no fallback
     assert runner.robot_side.patterns(Grasp(g.u, g.v, "L")) == ["L"]

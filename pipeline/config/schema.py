@@ -486,6 +486,7 @@ class EvaluateConfig:
     retry_changed_area_m2: float = MISSING  # m²: this much changed area near the point: changed
     # after these outcomes every pattern at the failed point is skipped, not only the failed one
     retry_point_outcomes: List[str] = MISSING
+    retry_drop_single_cup: bool = MISSING  # after a single cup dropped a box: no single cup there
     face_split_m: float = MISSING  # split the home region at other planner points this far away
     check_hand_fit: bool = MISSING  # the run-time check tests the pattern's cups on the surface
     single_cup_fallback: bool = MISSING  # a rejected B is tried with L, then R

@@ -15,8 +15,8 @@ objects and gives back plans and joint commands. It never sees the simulated wor
    cups' area are dropped;
 3. the first ``evaluate.max_candidates_checked`` grasps in rank order, each with its patterns
    in order of preference (the planner's; with ``evaluate.single_cup_fallback`` a B is
-   followed by L, then R; a single suction point is served by ``evaluate.dexnet_pattern``'s cup,
-   then the other): skipped when it repeats a failed plan (the retry memory); with
+   followed by L, then R; a single suction point is served by ``evaluate.dexnet_pattern``'s
+   cup, then the other): skipped when it repeats a failed plan (the retry memory); with
    ``evaluate.check_reachability`` (default) executed only when the descriptor finds a surface
    at it and the run-time check passes. The first that does is the plan; none: no grasp.
 

@@ -16,6 +16,12 @@ that area reaches ``retry_changed_area_m2``: a box picked, fallen, pushed or arr
 A 5 mm slide of a 10 cm box edge changes about 2 × 0.1 × 0.005 = 10 cm² (its leading and
 trailing edges); the default 5 cm² is half of that.
 
+**A box one cup could not hold** (``evaluate.retry_drop_single_cup``): after a single cup
+(L or R) dropped a box, single-cup plans within ``retry_same_point_m`` of that point stay
+skipped for the rest of the trial even when the heap has changed: a drop moves the box, so the
+heap always looks changed, but the box has not become lighter. Two cups (B) there remain a new
+plan.
+
 ``retry_policy: repeat``: no memory (identical plans are retried until the trial's failure
 limit ends it).
 """
@@ -66,6 +72,7 @@ class RetryMemory:
         self.depth_change_m = float(ev.retry_depth_change_m)
         self.area_m2 = float(ev.retry_changed_area_m2)
         self.point_outcomes = {str(o) for o in ev.retry_point_outcomes}
+        self.drop_single_cup = bool(ev.retry_drop_single_cup)
         self.failed: list[FailedPlan] = []
         self._now: tuple[int, np.ndarray] | None = None  # (id of the obs, its smoothed depth)
 
@@ -105,9 +112,12 @@ class RetryMemory:
         if self.policy == "repeat" or point_world is None:
             return False
         for f in self.failed:
-            same_plan = f.pattern == pattern or f.outcome in self.point_outcomes
-            if not same_plan or np.linalg.norm(point_world - f.point) > self.same_point_m:
+            if np.linalg.norm(point_world - f.point) > self.same_point_m:
                 continue
-            if self.changed_area(f, obs) < self.area_m2:
+            if self.drop_single_cup and f.outcome == "dropped" and f.pattern != "B" \
+                    and pattern != "B":
+                return True  # one cup did not hold this box: the heap's changes do not matter
+            same_plan = f.pattern == pattern or f.outcome in self.point_outcomes
+            if same_plan and self.changed_area(f, obs) < self.area_m2:
                 return True
         return False

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 from typing import Optional
 
 import numpy as np
@@ -116,6 +117,14 @@ class TrialResult:
     @property
     def planning_s(self) -> float:
         return float(sum(a.planning_s for a in self.attempts))
+
+
+def _surface_for_log(feats) -> SimpleNamespace:
+    """What the logs draw of the descriptor's surface (centre, axes, normal, lengths; camera
+    frame, metres), without its (H, W) region mask: a trial keeps one per control step."""
+    return SimpleNamespace(**{k: np.asarray(getattr(feats, k)).copy() for k in (
+        "center_cam", "normal_cam", "long_axis_cam", "short_axis_cam")},
+        long_length=float(feats.long_length), short_length=float(feats.short_length))
 
 
 def _link_origins(robot) -> np.ndarray:
@@ -232,7 +241,7 @@ class TrialRunner:
                               "g_opt": np.array([g.u, g.v], np.float64) if step == 0 else None,
                               "depth": obs.depth_m if step == 0 else None,
                               "g": s.g_px, "error": np.asarray(s.cmd.error).copy(),
-                              "surface": s.feats})
+                              "surface": _surface_for_log(s.feats)})
             att.final_error = [float(x) for x in np.abs(s.cmd.error[:3])] + [
                 float(np.degrees(np.linalg.norm(s.cmd.error[3:])))]
             if s.status == "converged":
