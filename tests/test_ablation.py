@@ -32,17 +32,20 @@ def test_smoke_ablation_end_to_end(tmp_path):
     from pipeline.evaluate import evaluate
 
     base = smoke_overrides(tmp_path)  # the oracle needs no upstream artifact
+    dev = evaluate(compose("evaluate", base + ["planner=oracle", "evaluate.split=dev"]))
     first = evaluate(compose("evaluate", base + ["planner=oracle"]))  # as make reproduce leaves it
     cfg = compose("ablation", base + ["ablation.planners=[oracle]"])  # the DCNN needs a network
-    cfg.ablation.variants = [cfg.ablation.variants[0], cfg.ablation.variants[2]]
+    by_name = {str(v.name): v for v in cfg.ablation.variants}
+    cfg.ablation.variants = [by_name["all_on"], by_name["no_path_check"]]
     out = ablation(cfg, base)
     latest = tmp_path / "data" / "evaluate" / "latest"
     assert latest.resolve() == first.resolve()
     rows = json.loads((out / "ablation.json").read_text())
     assert [(r["planner"], r["variant"], r["overrides"]) for r in rows] == [
         ("oracle", "all_on", "-"), ("oracle", "no_path_check", "robot.path_check=false")]
-    # all_on is the default evaluation itself: the same artifact, reused
-    assert rows[0]["evaluate_version"] == first.name
+    # all_on is the default evaluation on the dev heaps (the ablation never runs on test): the
+    # same artifact, reused; the test evaluation is another
+    assert rows[0]["evaluate_version"] == dev.name != first.name
     assert rows[1]["evaluate_version"] != first.name
     for name in ("ablation.csv", "log.rrd", "log.mcap"):
         assert (out / name).is_file()
