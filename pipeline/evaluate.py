@@ -31,6 +31,9 @@ Artifact (``data/evaluate/<version>/``)::
                             failures by kind, picks on another box, simulated seconds, PPH of
                             the robot's motion alone
     servo_convergence.csv   the servo error over time of the logged trials' attempts
+    drops_by_mass.csv       per planner, box type (by mass) and pattern: attempts that held the
+                            box at first, and how many dropped it, with the drop rate's Wilson
+                            95 % interval (``pipeline.world.books.drops_by_mass``)
     log.rrd, log.mcap       the logged trials step by step: camera pose, home depth images,
                             G_opt and g′, the reconstructed surface, the servo error
 
@@ -62,7 +65,7 @@ from pipeline.controller.retry import RETRY_POLICIES
 from pipeline.executor import map_shards, resolve_workers
 from pipeline.robot.approach import check_approach
 from pipeline.tracking import StageLog
-from pipeline.world.books import convergence_rows, summarise
+from pipeline.world.books import convergence_rows, drops_by_mass, summarise
 from pipeline.world.trial import (
     HEAP_STREAMS, OUTCOMES, TrialResult, TrialRunner, make_runner,
 )
@@ -344,6 +347,9 @@ def evaluate(cfg: DictConfig) -> Path:
         (run.work_dir / "trials.json").write_text(json.dumps(trials, indent=1) + "\n")
         rows = summarise(results)
         write_rows(run.work_dir / "table3.csv", rows, empty_header=("planner",))
+        drops = drops_by_mass(trials, cfg.eval_boxes)
+        write_rows(run.work_dir / "drops_by_mass.csv", drops, empty_header=("planner",))
+        run.metrics["drops_by_mass"] = drops
         write_rows(run.work_dir / "servo_convergence.csv", convergence_rows(results),
                    empty_header=("planner",))
         run.metrics["table3"] = rows

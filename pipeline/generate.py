@@ -33,11 +33,14 @@ from pipeline.artifacts.store import StageRun
 from pipeline.camera.geometry import (
     Intrinsics, camera_pose_above_bin, pose_matrix, quat_from_matrix,
 )
+from pipeline.camera.randomise import check_randomisation, draw_sensor, randomisation_rng
 from pipeline.camera.render import check_renderer
+from pipeline.camera.sensor import apply_sensor_model
 from pipeline.cli import CONF_DIR, data_root, stage_main
 from pipeline.dataset.scenes import SPLIT_CODES, SPLITS, SceneDataset
 from pipeline.dataset.storage import read_npz, write_npz
 from pipeline.executor import log_quota, map_shards, resolve_workers
+from pipeline.simulation.cartons import check_cartons
 from pipeline.simulation.scene import connect, scene_rng, simulate_scene
 from pipeline.tracking import StageLog, default_blueprint
 
@@ -107,16 +110,29 @@ def generate_shard(task: ShardTask) -> ShardSummary:
     max_depth = 65535 * unit
     cols: dict[str, list] = {k: [] for k in (
         "depth", "depth_clean", "mask", "scene_index", "seed", "num_boxes", "num_dropped", "num_removed",
-        "settle_steps", "settled", "box_type", "box_size", "box_T_world", "box_T_cam")}
+        "settle_steps", "settled", "box_type", "box_size", "box_mass", "box_T_world", "box_T_cam")}
+    rand = cfg.generate.camera_randomisation
+    randomised = bool(rand.enabled) and task.split in rand.splits
+    keep_clean = stores_clean_depth(cfg)
+    intr = Intrinsics.from_config(cfg.camera)
     for index in range(task.first, task.first + task.count):
         seed = (cfg.seed, SPLIT_CODES[task.split], index)
-        jitter = cfg.generate.size_jitter if task.split in cfg.generate.size_jitter_splits else 0.0
-        scene = simulate_scene(_CLIENT, cfg, scene_rng(*seed), size_jitter=jitter)
-        if float(scene.depth_m.max(initial=0.0)) > max_depth:
+        cartons = cfg.boxes.cartons is not None and task.split in cfg.generate.carton_splits
+        jitter = (cfg.generate.size_jitter
+                  if task.split in cfg.generate.size_jitter_splits and not cartons else 0.0)
+        scene = simulate_scene(_CLIENT, cfg, scene_rng(*seed), size_jitter=jitter,
+                               cartons=cartons)
+        depth = scene.depth_m
+        if randomised:
+            r_rng = randomisation_rng(*seed)
+            sensor = draw_sensor(rand, r_rng)
+            if sensor is not None:
+                depth = apply_sensor_model(scene.depth_clean_m, sensor, r_rng, intr)
+        if float(depth.max(initial=0.0)) > max_depth:
             raise ValueError(f"depth beyond {max_depth:.2f} m cannot be stored with "
                              f"generate.depth_unit={unit}; increase the unit")
-        cols["depth"].append(np.round(scene.depth_m / unit).astype(np.uint16))
-        if cfg.sensor.enabled:  # the ideal depth too: labels and clean-input baselines
+        cols["depth"].append(np.round(depth / unit).astype(np.uint16))
+        if keep_clean:  # the ideal depth too: labels and clean-input baselines
             cols["depth_clean"].append(np.round(scene.depth_clean_m / unit).astype(np.uint16))
         cols["mask"].append(scene.mask)
         cols["scene_index"].append(index)
@@ -130,6 +146,7 @@ def generate_shard(task: ShardTask) -> ShardSummary:
             T_world_box = pose_matrix(box.position, box.quat_xyzw)
             cols["box_type"].append(box.type_index)
             cols["box_size"].append(box.size)
+            cols["box_mass"].append(box.mass)
             cols["box_T_world"].append(T_world_box)
             cols["box_T_cam"].append(T_cam_world @ T_world_box)
     H, W = cfg.camera.height, cfg.camera.width
@@ -145,10 +162,11 @@ def generate_shard(task: ShardTask) -> ShardSummary:
         "settled": np.asarray(cols["settled"], dtype=bool),
         "box_type": np.asarray(cols["box_type"], dtype=np.int16),
         "box_size": np.asarray(cols["box_size"], dtype=np.float64).reshape(-1, 3),
+        "box_mass": np.asarray(cols["box_mass"], dtype=np.float64),
         "box_T_world": np.asarray(cols["box_T_world"], dtype=np.float64).reshape(-1, 4, 4),
         "box_T_cam": np.asarray(cols["box_T_cam"], dtype=np.float64).reshape(-1, 4, 4),
     }
-    if cfg.sensor.enabled:
+    if keep_clean:
         arrays["depth_clean"] = np.stack(cols["depth_clean"]).astype(np.uint16)
     assert arrays["depth"].shape == (task.count, H, W)
     Path(task.path).parent.mkdir(parents=True, exist_ok=True)
@@ -231,6 +249,21 @@ def _metrics(summaries: list[ShardSummary], sizes: dict[str, int], max_count: in
     return out
 
 
+def stores_clean_depth(cfg) -> bool:
+    """Whether the shards also hold the ideal ``depth_clean``: a sensor model or camera
+    randomisation makes ``depth`` differ from it."""
+    return bool(cfg.sensor.enabled) or bool(cfg.generate.camera_randomisation.enabled)
+
+
+def box_types_meta(cfg) -> list[dict]:
+    """camera.json's ``box_types``: the set's types, then ``carton`` (no fixed size) when the
+    boxes of some split come from ``boxes.cartons`` (their type index is ``len(types)``)."""
+    types = OmegaConf.to_container(cfg.boxes.types, resolve=True)
+    if cfg.boxes.cartons is not None and list(cfg.generate.carton_splits):
+        types.append({"name": "carton", "size": None})
+    return types
+
+
 def check_size_jitter(gcfg) -> None:
     """``generate.size_jitter`` in [0, 1) and ``generate.size_jitter_splits`` names splits."""
     if not 0 <= float(gcfg.size_jitter) < 1:
@@ -250,6 +283,12 @@ def generate(cfg: DictConfig) -> Path:
     if not cfg_obj.boxes.types:
         raise ValueError("boxes.types is empty: the box set needs at least one box type")
     check_size_jitter(cfg_obj.generate)
+    unknown = sorted(set(cfg_obj.generate.carton_splits) - set(SPLITS))
+    if unknown:
+        raise ValueError(f"generate.carton_splits has {unknown}: choose from {list(SPLITS)}")
+    if cfg_obj.boxes.cartons is not None:
+        check_cartons(cfg_obj.boxes.cartons)
+    check_randomisation(cfg_obj.generate.camera_randomisation, SPLITS)
     check_renderer(cfg_obj.camera.renderer)
     workers = resolve_workers(cfg_obj.generate.workers, cfg_obj.executor)
 
@@ -271,7 +310,7 @@ def generate(cfg: DictConfig) -> Path:
             "frames": {"camera": "OpenCV: x right, y down, z forward; metres",
                        "world": "z up; origin at the centre of the bin floor's top surface"},
             "bin": OmegaConf.to_container(cfg.bin, resolve=True),
-            "box_types": OmegaConf.to_container(cfg.boxes.types, resolve=True),
+            "box_types": box_types_meta(cfg),
         }, indent=2) + "\n")
         index = {"splits": {s: [] for s in SPLITS}}
         for t in tasks:

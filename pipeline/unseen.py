@@ -17,7 +17,13 @@ then measures on that unseen-size test split:
 
 * **Table 1** (``pipeline.planner.evaluate``, the model's calibrated th) of the trained network;
 * **Table 2** (``pipeline.baseline``'s measure: G_opt less than 30 px from a true face centre) of
-  the trained network and the Dex-Net-style planners.
+  the trained network and the Dex-Net-style planners;
+* **the closed loop** (``pipeline.evaluate``, unless ``unseen.closed_loop_trials`` is 0): every
+  planner of ``evaluate.planners`` (the DCNN, the Dex-Net-style planners, the oracle) on
+  ``unseen.closed_loop_trials`` heaps of 12 boxes of the unseen sizes
+  (``eval_boxes=<unseen.closed_loop_boxes>``), the test split, observation-only execution:
+  Table 3's rows (success and boxes picked with their Wilson intervals, trial ends, failure
+  reasons) and how often each pattern dropped a box, by box mass.
 
 The seen-size figures (the same tables on the training sizes' test split) are read from the
 train and baseline manifests, so the report shows both side by side.
@@ -27,11 +33,13 @@ Artifact (``data/unseen/<version>/``)::
     table1.csv         set (seen | unseen), Top 1, Top 1 %, Top 5 %, Top 10 % (pooled and per
                        image), predictions, scored images, images with no prediction
     table2.csv         set, planner, images, no grasp, within 30 px, median distance
+    closed_loop.csv    the closed loop's rows per planner (the evaluation's table3.csv)
+    drops_by_mass.csv  per planner, box type (by mass) and pattern: held, dropped, drop rate
     unseen.json        all of it, with the versions of every artifact used
     log.rrd, log.mcap  sample unseen-size test images with each planner's G_opt
 
-The unseen-size generation and label artifacts never become ``latest``: it keeps naming the
-ordinary pipeline's (``keep_latest``).
+The unseen-size generation, label and evaluation artifacts never become ``latest``: it keeps
+naming the ordinary pipeline's (``keep_latest``).
 """
 
 from __future__ import annotations
@@ -72,6 +80,14 @@ def build(base: list[str], uc, data: Path, models: Path) -> dict[str, Path]:
         choices = sorted(p.stem for p in boxes_file.parent.glob("*.yaml"))
         raise ValueError(f"unseen.boxes={uc.boxes!r} is not a file of conf/boxes/: choose one "
                          f"of {choices}")
+    if int(uc.closed_loop_trials) < 0:
+        raise ValueError(f"unseen.closed_loop_trials={uc.closed_loop_trials}: give a number of "
+                         "trials, or 0 for no closed loop")
+    loop_file = Path(CONF_DIR) / "eval_boxes" / f"{uc.closed_loop_boxes}.yaml"
+    if int(uc.closed_loop_trials) > 0 and not loop_file.is_file():
+        choices = sorted(p.stem for p in loop_file.parent.glob("*.yaml"))
+        raise ValueError(f"unseen.closed_loop_boxes={uc.closed_loop_boxes!r} is not a file of "
+                         f"conf/eval_boxes/: choose one of {choices}")
     # The planners under test: the trained network and the baseline artifact that compared it
     # (``make train``, ``make baseline``; ``latest`` unless named), as the evaluate stage reads them.
     dirs = compared_pair(data, models, uc.train_version, uc.baseline_version, STAGE)
@@ -81,11 +97,17 @@ def build(base: list[str], uc, data: Path, models: Path) -> dict[str, Path]:
         return dirs[key]
 
     # The unseen heaps, which must not become ``latest``.
-    with keep_latest([data / "generate", data / "label"]):
+    with keep_latest([data / "generate", data / "label", data / "evaluate"]):
         gen_u = run("generate_unseen", "generate", [
             f"boxes={uc.boxes}", "generate.num_scenes=0", "generate.num_val_scenes=0",
             f"generate.num_test_scenes={int(uc.test_scenes)}"])
         run("label_unseen", "label", [f"label.generate_version={gen_u.name}"])
+        if int(uc.closed_loop_trials) > 0:
+            run("evaluate_unseen", "evaluate", [
+                f"eval_boxes={uc.closed_loop_boxes}", "evaluate.split=test",
+                f"evaluate.num_trials={int(uc.closed_loop_trials)}",
+                f"evaluate.train_version={dirs['train'].name}",
+                f"evaluate.baseline_version={dirs['baseline'].name}"])
     return dirs
 
 
@@ -130,6 +152,15 @@ def unseen_tables(cfg, dirs: dict[str, Path], progress: bool) -> tuple[list, lis
     return t1, t2, picks
 
 
+def closed_loop_rows(folder: Path | None) -> tuple[list, list]:
+    """(Table 3's rows, the drops by mass) of the unseen-size evaluation artifact, from its
+    manifest; ([], []) without one."""
+    if folder is None:
+        return [], []
+    metrics = load_manifest(folder)["metrics"]
+    return list(metrics["table3"]), list(metrics.get("drops_by_mass", []))
+
+
 def _log(log: StageLog, gen_dir: Path, picks: dict, count: int, tables: dict) -> None:
     """Sample unseen-size test images with each planner's G_opt, and the tables."""
     from pipeline.dataset.pixels import pixels_to_points
@@ -167,11 +198,17 @@ def unseen(cfg: DictConfig, overrides: list[str] | None = None) -> Path:
         write_rows(run.work_dir / "table1.csv", t1)
         write_rows(run.work_dir / "table2.csv", t2)
         boxes = compose("generate", base + [f"boxes={uc.boxes}"]).boxes
+        loop, drops = closed_loop_rows(dirs.get("evaluate_unseen"))
+        if "evaluate_unseen" in dirs:
+            write_rows(run.work_dir / "closed_loop.csv", loop, empty_header=("planner",))
+            write_rows(run.work_dir / "drops_by_mass.csv", drops, empty_header=("planner",))
         tables = json_safe({"table1": t1, "table2": t2, "artifacts": upstream,
                             "boxes": [{"name": str(b.name), "size": [float(x) for x in b.size]}
-                                      for b in boxes.types]})
+                                      for b in boxes.types],
+                            "closed_loop": loop, "drops_by_mass": drops})
         write_json(run.work_dir / "unseen.json", tables)
-        run.metrics.update({k: tables[k] for k in ("table1", "table2", "boxes")})
+        run.metrics.update({k: tables[k] for k in ("table1", "table2", "boxes", "closed_loop",
+                                                     "drops_by_mass")})
         with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version) as log:
             _log(log, dirs["generate_unseen"], picks, int(uc.log_images), tables)
 

@@ -382,6 +382,23 @@ def test_lifted_goal_by_hand(runner):
     assert d == pytest.approx(0.15) and cfg is runner.robot_side.servo_cfg
 
 
+def test_first_goal_is_a_via_point(runner):
+    """The lift's and the pre-grasp's goals take motion.via_tolerance_scale (k) times the servo's
+    tolerances; d* keeps its own. k = 2: 0.01 -> 0.02 (x, y, log Z), 1 deg -> 2 deg."""
+    T_home = runner.cell.robot.home_camera_pose()
+    centre, feats = _level_face()
+    final = runner.robot_side.servo_cfg
+    runner.cfg.motion.via_tolerance_scale = 2.0
+    for approach in ("lift", "pregrasp"):
+        runner.cfg.motion.approach = approach
+        cfg, _ = _first_goal(runner, centre, feats, "B", T_home)
+        assert (cfg.tolerance_xy, cfg.tolerance_log_z, cfg.tolerance_rot_deg) == pytest.approx(
+            (2 * final.tolerance_xy, 2 * final.tolerance_log_z, 2 * final.tolerance_rot_deg))
+    runner.cfg.motion.via_tolerance_scale = 0.5
+    with pytest.raises(ValueError, match="via_tolerance_scale"):
+        _first_goal(runner, centre, feats, "B", T_home)
+
+
 def test_lift_is_cut_to_keep_a_steep_face_in_view(runner):
     """A face tilted 60° about the camera x axis: lifting the grasp pose straight up moves the
     centre sideways in the goal's view by about h·sin 60°, so the full 0.15 m lift would put it

@@ -173,6 +173,9 @@ def test_a_servo_that_sweeps_a_wall_is_rejected(smoke_cfg):
 
     cfg = smoke_cfg("evaluate", "evaluate.boxes_per_trial=1",
                     "eval_boxes.types=[{name: square, size: [0.09, 0.09, 0.035]}]")
+    # the servo stops at the lift's via point (the case was worked out for that path; passing
+    # the via point early cuts the corner and clears this wall)
+    cfg.motion.via_tolerance_scale = 1.0
     cell = PickCell(cfg, lambda: Robot(robot_config(cfg)))
     try:
         cell.reset(np.random.default_rng(0), 1)

@@ -367,3 +367,67 @@ def test_draw_order_noise_steep_edge():
     assert 0 < (s < p_steep).sum() < z.size  # the steep draw matters here
     expected = np.where(lost, 0.0, noisy).astype(np.float32)
     np.testing.assert_allclose(out, expected, rtol=0, atol=1e-7)
+
+
+# --- holes, calibration error, randomised models ------------------------------------------------
+
+def test_hole_mask_blocks_by_hand():
+    """A 5 × 7 image in 2-pixel blocks: 3 × 4 blocks, each lost when its uniform < rate. rate 0:
+    nothing; rate 1: everything; blocks are whole 2 × 2 squares, cut at the image's edge."""
+    from pipeline.camera.sensor import hole_mask
+
+    assert not hole_mask((5, 7), 0.0, 2, np.random.default_rng(0)).any()
+    assert hole_mask((5, 7), 1.0, 2, np.random.default_rng(0)).all()
+    rng = np.random.default_rng(3)
+    blocks = np.random.default_rng(3).random((3, 4)) < 0.5
+    m = hole_mask((5, 7), 0.5, 2, rng)
+    assert m.shape == (5, 7)
+    assert np.array_equal(m, np.kron(blocks, np.ones((2, 2), bool))[:5, :7].astype(bool))
+    with pytest.raises(ValueError, match="hole_size_px"):
+        hole_mask((5, 7), 0.5, 0, rng)
+
+
+def test_bias_and_scale_error_by_hand():
+    """No noise or dropout: a flat 0.5 m image comes back as 0.5 × (1 + 0.01) + 0.002 = 0.507 m;
+    pixels without data stay 0."""
+    z = np.full((41, 41), 0.5, np.float32)
+    z[0, 0] = 0.0
+    cfg = sensor_cfg(**NO_DROPOUT, noise_sigma_0=0.0, noise_sigma_2=0.0, noise_sigma_theta=0.0,
+                     quantisation_step=0.0, depth_bias=0.002, depth_scale_error=0.01)
+    out = apply_sensor_model(z, cfg, np.random.default_rng(0), CENTRED)
+    assert out[0, 0] == 0.0
+    assert np.allclose(out[1:, 1:], 0.507, atol=1e-6)
+
+
+def test_randomised_sensors_stay_in_their_ranges():
+    from pipeline.camera.randomise import check_randomisation, draw_sensor
+    from pipeline.cli import compose
+
+    rand = OmegaConf.to_object(compose("generate", ["experiment=smoke"])).generate \
+        .camera_randomisation
+    check_randomisation(rand, ("train", "val", "test"))
+    rng = np.random.default_rng(0)
+    drawn = [draw_sensor(rand, rng) for _ in range(400)]
+    models = [d for d in drawn if d is not None]
+    assert 0.5 * (1 - rand.ideal_fraction) < len(models) / len(drawn) < 1.5 * (
+        1 - rand.ideal_fraction)
+    for m in models:
+        assert m.enabled and m.dropout_angle_deg < 90
+        for key in ("noise_sigma_0", "noise_sigma_2", "hole_rate", "depth_bias",
+                    "depth_scale_error", "projector_baseline", "edge_dropout_prob"):
+            lo, hi = getattr(rand, key)
+            assert lo <= getattr(m, key) <= hi
+        assert rand.hole_size_px[0] <= m.hole_size_px <= rand.hole_size_px[1]
+    # the SR300 profile lies inside the ranges
+    sr = sensor_cfg()
+    for key in ("noise_sigma_0", "noise_sigma_2", "noise_sigma_theta", "projector_baseline",
+                "edge_dropout_prob", "quantisation_step", "depth_bias", "depth_scale_error"):
+        lo, hi = getattr(rand, key)
+        assert lo <= getattr(sr, key) <= hi, key
+    import dataclasses
+    with pytest.raises(ValueError, match="below 90"):
+        check_randomisation(dataclasses.replace(rand, dropout_angle_span_deg=[5.0, 40.0]),
+                            ("train", "val", "test"))
+    with pytest.raises(ValueError, match="splits"):
+        check_randomisation(dataclasses.replace(rand, splits=["training"]),
+                            ("train", "val", "test"))

@@ -34,7 +34,19 @@ def test_bad_input_is_refused_before_any_work(tmp_path):
         unseen(compose("unseen", _base(tmp_path) + ["unseen.boxes=nowhere"]))
     with pytest.raises(ValueError, match="test_scenes"):
         unseen(compose("unseen", _base(tmp_path) + ["unseen.test_scenes=0"]))
+    with pytest.raises(ValueError, match="conf/eval_boxes"):
+        unseen(compose("unseen", _base(tmp_path) + ["unseen.closed_loop_boxes=nowhere"]))
+    with pytest.raises(ValueError, match="closed_loop_trials"):
+        unseen(compose("unseen", _base(tmp_path) + ["unseen.closed_loop_trials=-1"]))
     assert not (tmp_path / "data").exists()
+
+
+def test_closed_loop_boxes_are_the_unseen_sizes():
+    """eval_boxes=unseen holds the unseen set's sizes, 12 to a heap."""
+    cfg = compose("evaluate", ["eval_boxes=unseen"])
+    unseen = compose("generate", ["boxes=unseen"]).boxes
+    assert [list(b.size) for b in cfg.eval_boxes.types] == [list(b.size) for b in unseen.types]
+    assert cfg.eval_boxes.min_count == cfg.eval_boxes.max_count == 12
 
 
 @pytest.mark.slow
@@ -42,6 +54,7 @@ def test_smoke_unseen_end_to_end(smoke_pipeline, tmp_path):
     from conftest import smoke_overrides
     from pipeline.artifacts import ArtifactError, load_manifest
     from pipeline.baseline import baseline
+    from pipeline.evaluate import evaluate
     from pipeline.report import report
     from pipeline.report.unseen import UNSEEN_SECTION
     from pipeline.unseen import unseen
@@ -54,6 +67,7 @@ def test_smoke_unseen_end_to_end(smoke_pipeline, tmp_path):
     root = smoke.root
     base = smoke_overrides(root, "baseline.epochs=1")
     baseline(compose("baseline", base))  # as make reproduce runs it before unseen
+    table3 = evaluate(compose("evaluate", base)).name  # likewise
     cfg = compose("unseen", base)
     seen_gen = smoke.artifact("generate").name
     out = unseen(cfg, base)
@@ -79,10 +93,22 @@ def test_smoke_unseen_end_to_end(smoke_pipeline, tmp_path):
     sets = {(r["set"], r["planner"]) for r in data["table2"]}
     assert {p for s, p in sets if s == "seen"} == {p for s, p in sets if s == "unseen"}
     assert all(r["images"] <= 2 for r in data["table2"] if r["set"] == "unseen")
-    for name in ("table1.csv", "table2.csv", "log.rrd", "log.mcap"):
+    for name in ("table1.csv", "table2.csv", "closed_loop.csv", "drops_by_mass.csv", "log.rrd",
+                 "log.mcap"):
         assert (out / name).is_file()
+    # the closed loop: every planner on heaps of the unseen boxes, drawn from the test stream
+    ev = load_manifest(root / "data" / "evaluate" / up["evaluate_unseen"])
+    assert ev["config"]["eval_boxes"]["name"] == "unseen"
+    assert ev["config"]["evaluate"]["split"] == "test"
+    assert [r["planner"] for r in data["closed_loop"]] == ev["config"]["evaluate"]["planners"]
+    keys = ("planner", "boxes", "picked", "attempts", "successes", "end_no_grasp")
+    assert [{k: r[k] for k in keys} for r in data["closed_loop"]] == \
+        [{k: r[k] for k in keys} for r in ev["metrics"]["table3"]]
+    assert up["evaluate_unseen"] != table3  # other heaps: another evaluation
+    assert (root / "data" / "evaluate" / "latest").resolve().name == table3
     assert unseen(cfg, base) == out  # reused
     report(compose("report", base))
     readme = (root / "reports" / "README.md").read_text()
     assert f"## {UNSEEN_SECTION}" in readme and out.name in readme
     assert (root / "reports" / "tables" / "unseen_table2.csv").is_file()
+    assert (root / "reports" / "tables" / "unseen_closed_loop.csv").is_file()

@@ -17,11 +17,15 @@ from pipeline.artifacts.store import LATEST, point_latest
 
 @contextmanager
 def keep_latest(stage_dirs: Iterable[Path]):
-    """Restore the ``latest`` symlink of each of ``stage_dirs`` (where it existed) on exit."""
+    """Leave the ``latest`` symlink of each of ``stage_dirs`` as it was on entry: restored where
+    it existed, removed where it did not (a study's artifacts never become ``latest``)."""
     dirs = [Path(d) for d in stage_dirs]
     before = {d: os.readlink(d / LATEST) for d in dirs if (d / LATEST).is_symlink()}
     try:
         yield
     finally:
-        for d, target in before.items():
-            point_latest(d, target)
+        for d in dirs:
+            if d in before:
+                point_latest(d, before[d])
+            elif (d / LATEST).is_symlink():
+                (d / LATEST).unlink()

@@ -17,21 +17,26 @@ camera returns, in four steps (parameters and their sources: ``conf/sensor/sr300
      at θ = ``dropout_angle_deg``;
    * *out of range*: ideal depth outside [``min_range``, ``max_range``];
    * *mixed pixels at depth steps*: a pixel whose depth differs from a 4-neighbour by more
-     than ``edge_jump`` is lost with probability ``edge_dropout_prob``.
+     than ``edge_jump`` is lost with probability ``edge_dropout_prob``;
+   * *holes* (``hole_mask``): square blobs of ``hole_size_px`` pixels anywhere in the image,
+     covering about ``hole_rate`` of it (dark or specular spots; 0 = none).
 3. **Axial noise**, Gaussian with standard deviation (Nguyen, Izadi & Lovell 2012's form)
 
        σ(z, θ) = noise_sigma_0 + noise_sigma_2 · z² + noise_sigma_theta / √z · θ² / (π/2 − θ)²
 
    (metres, z in metres, θ in radians): growing with the square of depth (triangulation)
    and sharply at grazing incidence.
-4. **Quantisation** to the sensor's depth unit (``quantisation_step``).
+4. **Calibration error**: depth × (1 + ``depth_scale_error``) + ``depth_bias`` (0 and 0 in
+   the SR300 profile; the randomised training depth draws both).
+5. **Quantisation** to the sensor's depth unit (``quantisation_step``).
 
 Not modelled: lateral (pixel-position) noise, multi-path and interference between cameras,
 temporal noise (one image per scene), the firmware's own smoothing.
 
 Random draws, in this order from the caller's generator: the noise (H·W normals), the
 steep-surface uniforms (H·W, only when ``dropout_angle_deg < 90``), then the edge-dropout
-uniforms (H·W, only when ``edge_dropout_prob > 0``). A disabled model returns the
+uniforms (H·W, only when ``edge_dropout_prob > 0``), then the hole blobs' uniforms
+(⌈H/s⌉·⌈W/s⌉ for blob side s, only when ``hole_rate > 0``). A disabled model returns the
 input itself and draws nothing.
 """
 
@@ -151,6 +156,17 @@ def steep_dropout(theta: np.ndarray, sensor_cfg, rng: np.random.Generator) -> np
     return rng.random(theta.shape) < prob
 
 
+def hole_mask(shape: tuple[int, int], rate: float, size_px: int,
+              rng: np.random.Generator) -> np.ndarray:
+    """(H, W) bool: the image cut into ``size_px`` × ``size_px`` blocks, each lost with
+    probability ``rate`` (so about ``rate`` of the image is lost, in square blobs)."""
+    if size_px < 1:
+        raise ValueError(f"sensor hole_size_px must be >= 1, got {size_px}")
+    H, W = shape
+    blocks = rng.random((-(-H // size_px), -(-W // size_px))) < rate
+    return np.repeat(np.repeat(blocks, size_px, axis=0), size_px, axis=1)[:H, :W]
+
+
 def noise_sigma(z: np.ndarray, theta: np.ndarray, sensor_cfg) -> np.ndarray:
     """σ(z, θ) of the module docstring, metres. ``z`` metres, ``theta`` radians (< π/2).
 
@@ -195,6 +211,9 @@ def apply_sensor_model(depth_m: np.ndarray, sensor_cfg, rng: np.random.Generator
     if float(sensor_cfg.edge_dropout_prob) > 0:
         lost |= depth_steps(z, float(sensor_cfg.edge_jump)) & (
             rng.random(z.shape) < float(sensor_cfg.edge_dropout_prob))
+    if float(sensor_cfg.hole_rate) > 0:
+        lost |= hole_mask(z.shape, float(sensor_cfg.hole_rate), int(sensor_cfg.hole_size_px), rng)
+    out = out * (1.0 + float(sensor_cfg.depth_scale_error)) + float(sensor_cfg.depth_bias)
     step = float(sensor_cfg.quantisation_step)
     if step > 0:
         out = np.round(out / step) * step

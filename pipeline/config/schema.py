@@ -77,11 +77,29 @@ class BoxType:
 
 
 @dataclass
+class CartonsConfig:
+    """A continuous distribution of cartons (``pipeline.simulation.cartons``): edges from ranges,
+    density from a range, mass capped at the hand's payload, held-out sizes carved out. Metres,
+    kg/m³, kg."""
+
+    long_edge: List[float] = MISSING  # [low, high] of the longest edge, m
+    middle_ratio: List[float] = MISSING  # [low, high] of middle / long
+    short_ratio: List[float] = MISSING  # [low, high] of short / middle
+    min_edge: float = MISSING  # m: a thinner carton is drawn again
+    density: List[float] = MISSING  # [low, high], kg/m³
+    max_mass: float = MISSING  # kg (the hand's payload)
+    held_out: List[List[float]] = MISSING  # sizes (m) kept outside the distribution ...
+    held_out_margin: float = MISSING  # ... with every sorted edge within this fraction of theirs
+
+
+@dataclass
 class BoxesConfig:
-    """The box set that heaps are drawn from (uniformly over ``types``)."""
+    """The box set that heaps are drawn from (uniformly over ``types``; with ``cartons``, the
+    splits of ``generate.carton_splits`` draw every box from that distribution instead)."""
 
     name: str = MISSING
     types: List[BoxType] = MISSING
+    cartons: Optional[CartonsConfig] = MISSING  # None: every box from types
     density: float = MISSING  # kg/m^3
     lateral_friction: float = MISSING
     min_count: int = MISSING
@@ -161,6 +179,10 @@ class SensorConfig:
     edge_jump: float = MISSING  # m: a depth step between 4-neighbours
     edge_dropout_prob: float = MISSING  # chance a pixel at a depth step is lost
     quantisation_step: float = MISSING  # m (0 = none)
+    hole_rate: float = MISSING  # share of the image lost in blobs of hole_size_px (0 = none)
+    hole_size_px: int = MISSING  # side of a hole blob, pixels
+    depth_bias: float = MISSING  # m added to every depth (calibration offset)
+    depth_scale_error: float = MISSING  # depth × (1 + this) (calibration scale error)
 
 
 @dataclass
@@ -170,6 +192,33 @@ class DepthFilterConfig:
     name: str = MISSING
     fill_holes_px: int = MISSING  # fill holes from the farthest neighbour, this many 3 x 3 passes
     median_px: int = MISSING  # median kernel (3 or 5) after filling
+
+
+@dataclass
+class CameraRandomisationConfig:
+    """Training depth through randomised sensor models (``pipeline.camera.randomise``): in the
+    splits ``splits``, a scene keeps the ideal depth with probability ``ideal_fraction``, else
+    each sensor parameter is drawn uniformly from its [low, high] range here (the others are
+    ``sensor``'s SR300-class values' keys: see ``SensorConfig``)."""
+
+    enabled: bool = MISSING
+    splits: List[str] = MISSING
+    ideal_fraction: float = MISSING
+    noise_sigma_0: List[float] = MISSING
+    noise_sigma_2: List[float] = MISSING
+    noise_sigma_theta: List[float] = MISSING
+    projector_baseline: List[float] = MISSING
+    dropout_angle_start_deg: List[float] = MISSING
+    dropout_angle_span_deg: List[float] = MISSING  # dropout_angle_deg = start + this
+    edge_dropout_prob: List[float] = MISSING
+    quantisation_step: List[float] = MISSING
+    hole_rate: List[float] = MISSING
+    hole_size_px: List[int] = MISSING
+    depth_bias: List[float] = MISSING
+    depth_scale_error: List[float] = MISSING
+    min_range: float = MISSING  # m, fixed (as SensorConfig's)
+    max_range: float = MISSING  # m, fixed
+    edge_jump: float = MISSING  # m, fixed
 
 
 @dataclass
@@ -183,6 +232,9 @@ class GenerateConfig:
     depth_unit: float = MISSING  # stored depth = round(depth_m / depth_unit) as uint16 (0 = no data)
     size_jitter: float = MISSING  # each box edge scaled by U(1 - j, 1 + j) in size_jitter_splits
     size_jitter_splits: List[str] = MISSING  # splits whose boxes are jittered (others: exact sizes)
+    carton_splits: List[str] = MISSING  # splits whose boxes come from boxes.cartons (when set)
+    camera_randomisation: CameraRandomisationConfig = field(
+        default_factory=CameraRandomisationConfig)
     workers: int = MISSING  # 0 = all cores; does not change the artifact
     force: bool = MISSING  # recompute even if this version exists
 
@@ -201,6 +253,7 @@ class HandConfig:
     rotations_deg: List[float] = MISSING
     # labels: a pattern whose cups would not hold the box's weight (the suction hold test) is NG
     hold_check: bool = MISSING
+    payload_kg: float = MISSING  # the heaviest box the hand is meant to lift (both cups)
 
 
 @dataclass
@@ -420,6 +473,7 @@ class MotionSchema:
     pregrasp_wall_margin: float = MISSING  # m, camera and cup lips this far inside the walls
     pregrasp_image_fraction: float = MISSING  # lift: the centre within this share of the half-FOV
     approach: str = MISSING  # "lift" | "pregrasp" | "direct" (the paper: straight to d*)
+    via_tolerance_scale: float = MISSING  # the first goal counts as reached within this x servo tolerances
 
 
 @dataclass
@@ -535,12 +589,15 @@ class RobustnessConfig:
 
 @dataclass
 class UnseenConfig:
-    """The unseen-size test set (``pipeline.unseen``): Tables 1 and 2 on heaps of other boxes."""
+    """The unseen-size test set (``pipeline.unseen``): Tables 1 and 2 on heaps of other boxes,
+    and the closed loop on heaps of them."""
 
     boxes: str = MISSING  # a file of conf/boxes/ (the heaps' box sizes)
     train_version: str = MISSING  # the trained network ("latest" or a version)
     baseline_version: str = MISSING  # the baseline artifact that compared it
     test_scenes: int = MISSING
+    closed_loop_boxes: str = MISSING  # a file of conf/eval_boxes/ (the closed loop's boxes)
+    closed_loop_trials: int = MISSING  # trials per planner on the test split (0 = none)
     log_images: int = MISSING
     force: bool = MISSING
 

@@ -12,7 +12,8 @@ Each shard holds ``N`` scenes (``generate.scenes_per_shard``) and ``M`` boxes in
 
     depth         (N, H, W) uint16   z-depth in units of ``depth_unit`` metres (0 = no data), as
                                      the sensor model (``camera.json``'s ``sensor``) returns it
-    depth_clean   (N, H, W) uint16   the ideal rendered depth; only when a sensor model is on
+    depth_clean   (N, H, W) uint16   the ideal rendered depth; only when a sensor model or camera
+                                     randomisation is on
     mask          (N, H, W) uint8    0 = not a box (bin, ground); k = the scene's k-th box (1-based)
     scene_index   (N,) int64         index of the scene within its split
     seed          (N, 3) int64       the scene's seed: (base seed, split code, scene index)
@@ -23,6 +24,8 @@ Each shard holds ``N`` scenes (``generate.scenes_per_shard``) and ``M`` boxes in
     settled       (N,) bool          False if the step cap was reached first
     box_type      (M,) int16         index into camera.json's ``box_types``
     box_size      (M, 3) float64     edge lengths along the box's own x, y, z, metres
+    box_mass      (M,) float64       kg (artifacts made before it existed: absent, mass = density
+                                     x volume)
     box_T_world   (M, 4, 4) float64  pose of the box centre in the world frame
     box_T_cam     (M, 4, 4) float64  pose of the box centre in the camera frame
 
@@ -56,6 +59,7 @@ class Box:
     size: np.ndarray  # (3,) metres
     T_world_box: np.ndarray  # (4, 4)
     T_cam_box: np.ndarray  # (4, 4)
+    mass: float | None = None  # kg; None: the box set's density x volume
 
 
 @dataclass
@@ -143,7 +147,8 @@ class SceneDataset:
             Box(instance=j + 1, type_index=int(arrays["box_type"][b]),
                 type_name=self.box_types[int(arrays["box_type"][b])]["name"],
                 size=arrays["box_size"][b], T_world_box=arrays["box_T_world"][b],
-                T_cam_box=arrays["box_T_cam"][b])
+                T_cam_box=arrays["box_T_cam"][b],
+                mass=float(arrays["box_mass"][b]) if "box_mass" in arrays else None)
             for j, b in enumerate(range(b0, b1))
         ]
         depth = arrays["depth"][row].astype(np.float32) * np.float32(self.depth_unit)

@@ -303,7 +303,8 @@ def evaluate_contacts(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m: np.
         depth_m: (H, W) z-depth in metres, 0 = no data (noise-free depth for exact labels).
         mask: (H, W) instance mask: 0 = not a box, k = ``boxes[k-1]``.
         intrinsics: the camera's intrinsics; the image size must match depth and mask.
-        boxes: sequence of objects with ``size`` (3,) edge lengths in metres and ``T_cam_box``
+        boxes: sequence of objects with ``size`` (3,) edge lengths in metres, optionally
+            ``mass`` (kg; None or absent: ``cfg.density`` x volume), and ``T_cam_box``
             (4, 4) box-centre pose in the camera frame (e.g. ``pipeline.dataset.scenes.Box``).
         gravity_cam: (3,) direction of gravity in the camera frame; normalised here.
         cfg: model settings.
@@ -354,7 +355,9 @@ def evaluate_contacts(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m: np.
     occluded = occluded_contacts(pts, b + 1, depth_m, mask, intrinsics, cfg)
 
     # Rule 4: the box's weight against the soft contact's wrench limits.
-    mass = cfg.density * np.prod(size[b], axis=1)  # (M,)
+    box_mass = np.array([b_.mass if getattr(b_, "mass", None) is not None
+                         else cfg.density * float(np.prod(b_.size)) for b_ in boxes])  # (B,)
+    mass = box_mass[b]  # (M,)
     wrench = wrench_failures(mass, centre[b], hit0, a_on, g_dir, cfg)
     return record_rules(out, on, b + 1, off_face, uneven, occluded, wrench)
 

@@ -44,7 +44,8 @@ def pattern_holds(surface: Surface, hl: HandLabel, box: Box, T_world_cam: np.nda
 
     Frames: ``surface`` and ``box.T_cam_box`` in the camera frame, ``T_world_cam`` the camera's
     pose in the world (z up); metres. ``suction``: cup radius, vacuum force, friction, gravity
-    (m/s²) and the boxes' density (kg/m³).
+    (m/s²) and the boxes' density (kg/m³), which gives the mass of a box without its own
+    ``mass`` (kg).
     """
     from pipeline.world.suction import hold_test
 
@@ -57,7 +58,8 @@ def pattern_holds(surface: Surface, hl: HandLabel, box: Box, T_world_cam: np.nda
     else:
         points = c[None]
     gravity_cam = T_world_cam[:3, :3].T @ np.array([0.0, 0.0, -suction.gravity])
-    mass = suction.density * float(np.prod(box.size))
+    mass = box.mass if getattr(box, "mass", None) is not None else \
+        suction.density * float(np.prod(box.size))
     return hold_test(mass, box.T_cam_box[:3, 3], points, -n, gravity_cam, suction,
                      cup_offset).ok
 

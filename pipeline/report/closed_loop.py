@@ -24,7 +24,7 @@ from pipeline.report.ablation import (
 from pipeline.report.figures import figure_servo_convergence
 from pipeline.report.section import Context, Section
 from pipeline.report.tables import (
-    Column, Table, book_columns, count_column, end_columns, failure_columns, number,
+    Column, Table, book_columns, count_column, drops_table, end_columns, failure_columns, number,
     pph_column, reason_column, table_of, text_column,
 )
 from pipeline.report.upstream import ArtifactInfo, resolve_upstream
@@ -351,10 +351,21 @@ def render_evaluate(info: EvaluateInfo | None, tables: dict[str, Table],
         f"from that prediction, per attempt ({split} trials):",
         "",
         tables["table3_path_deviation"].markdown(),
+    ]
+    if "table3_drops_by_mass" in tables:
+        out += [
+            f"How often the pattern each planner chose dropped a box that it had held at first, "
+            f"by box mass (mass = density × volume; {split} trials):",
+            "",
+            tables["table3_drops_by_mass"].markdown(),
+        ]
+    out += [
         "CSV versions: [tables/table3_success.csv](tables/table3_success.csv), "
         "[tables/table3_failures.csv](tables/table3_failures.csv), "
         "[tables/table3_no_grasp.csv](tables/table3_no_grasp.csv), "
-        "[tables/table3_path_deviation.csv](tables/table3_path_deviation.csv).",
+        "[tables/table3_path_deviation.csv](tables/table3_path_deviation.csv)"
+        + (", [tables/table3_drops_by_mass.csv](tables/table3_drops_by_mass.csv)"
+           if "table3_drops_by_mass" in tables else "") + ".",
         "",
     ]
     return out
@@ -379,8 +390,12 @@ class ClosedLoopSection(Section):
         return {}
 
     def tables(self, info: EvaluateInfo, ctx: Context) -> list[Table]:
-        return [table3_table(info, info.ablation), failures_table(info, info.ablation),
-                no_grasp_table(info), table3_timing_table(info), path_deviation_table(info)]
+        out = [table3_table(info, info.ablation), failures_table(info, info.ablation),
+               no_grasp_table(info), table3_timing_table(info), path_deviation_table(info)]
+        drops = info.manifest.get("metrics", {}).get("drops_by_mass")
+        if drops:  # evaluations made before the drops were counted have none
+            out.append(drops_table("table3_drops_by_mass", drops))
+        return out
 
     def figures(self, info: EvaluateInfo, ctx: Context, folder: Path) -> dict[str, str]:
         figure_servo_convergence(info.folder / "servo_convergence.csv",

@@ -238,3 +238,13 @@ def reason_column() -> Column:
     """Why a row made no attempt (``no_attempt_reason``: its trial ends and, for "no grasp",
     the candidates and what rejected them); empty for a row with attempts, — where unknown."""
     return text_column("no attempt: why", "no_attempt_reason")
+
+
+def drops_table(name: str, rows: list[dict]) -> Table:
+    """How often each pattern dropped a box, by box mass (``drops_by_mass`` rows of an
+    evaluation: planner, box, mass, pattern, held, dropped, drop rate with its 95 % interval)."""
+    columns = [text_column("planner", "planner"), text_column("box", "box"),
+               Column("mass (kg)", lambda r: number(r.get("mass_kg")), "{:.3f}"),
+               text_column("pattern", "pattern"), count_column("held at first", "held"),
+               count_column("dropped", "dropped"), rate_column("drop rate", "drop")]
+    return table_of(name, columns, rows, text_columns=2)

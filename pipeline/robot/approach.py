@@ -95,6 +95,9 @@ def first_goal(servo_cfg, cfg, T_world_cam: np.ndarray, centre_cam: np.ndarray,
       (``ServoConfig.target_point``). From there the servo descends (nearly) vertically;
     * pregrasp: d* replaced by :func:`pregrasp_standoff` along the normal;
     * direct, or a lift or pre-grasp that shrank to nothing: ``servo_cfg`` itself (d*).
+
+    A first goal other than ``servo_cfg`` is a via point: its tolerances are
+    ``motion.via_tolerance_scale`` times ``servo_cfg``'s.
     """
     hand, m, b = cfg.hand, cfg.motion, cfg.bin
     d_star, off = float(hand.standoff), float(hand.cup_offset)
@@ -107,7 +110,7 @@ def first_goal(servo_cfg, cfg, T_world_cam: np.ndarray, centre_cam: np.ndarray,
                               float(b.inner_width_y) / 2 - margin)
         if d <= d_star:
             return servo_cfg, d_star
-        return dataclasses.replace(servo_cfg, standoff=d), d
+        return _via(dataclasses.replace(servo_cfg, standoff=d), m), d
     if approach == "lift":
         T = target_camera_pose(centre_cam, normal_cam, x_axis_cam, pattern, standoff=d_star,
                                cup_offset=off)
@@ -116,9 +119,20 @@ def first_goal(servo_cfg, cfg, T_world_cam: np.ndarray, centre_cam: np.ndarray,
                                *image_limits(intrinsics, float(m.pregrasp_image_fraction)),
                                float(m.pregrasp_standoff) - d_star)
         if point is not None:
-            return dataclasses.replace(
-                servo_cfg, target_point=tuple(float(x) for x in point)), d_star + h
+            return _via(dataclasses.replace(
+                servo_cfg, target_point=tuple(float(x) for x in point)), m), d_star + h
     return servo_cfg, d_star
+
+
+def _via(goal, motion_cfg):
+    """``goal`` as a via point: its tolerances times ``motion.via_tolerance_scale``."""
+    k = float(motion_cfg.via_tolerance_scale)
+    if k < 1:
+        raise ValueError(f"motion.via_tolerance_scale must be >= 1 (a via point is no tighter "
+                         f"than the goal), got {k}")
+    return dataclasses.replace(goal, tolerance_xy=goal.tolerance_xy * k,
+                               tolerance_log_z=goal.tolerance_log_z * k,
+                               tolerance_rot_deg=goal.tolerance_rot_deg * k)
 
 
 def image_limits(intrinsics, fraction: float) -> tuple[float, float]:

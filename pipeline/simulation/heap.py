@@ -20,11 +20,13 @@ class BoxPose:
     """One box at rest.
 
     Attributes:
-        type_index: index into the box set's ``types``.
+        type_index: index into the box set's ``types``; ``len(types)`` for a carton drawn from
+            ``boxes.cartons``.
         size: (3,) edge lengths along the box's own x, y, z axes, metres.
         position: (3,) centre in the world frame, metres.
         quat_xyzw: (4,) orientation in the world frame, unit quaternion (x, y, z, w).
         body_id: pybullet body unique id in the current simulation.
+        mass: kg.
     """
 
     type_index: int
@@ -32,6 +34,7 @@ class BoxPose:
     position: np.ndarray
     quat_xyzw: np.ndarray
     body_id: int
+    mass: float = 0.0
 
 
 @dataclass
@@ -161,26 +164,42 @@ def jittered_size(size: np.ndarray, size_jitter: float, rng: np.random.Generator
 
 
 def drop_heap(client: int, rng: np.random.Generator, boxes_cfg, bin_cfg, physics_cfg,
-              size_jitter: float = 0.0) -> HeapResult:
+              size_jitter: float = 0.0, cartons: bool = False) -> HeapResult:
     """Drop a random number of random boxes one by one ("trickle"), settle, remove escapees.
 
     Random draws, in this order: the count, then per box its type, x, y and orientation, and,
-    when ``size_jitter`` > 0, its three edge scale factors (``jittered_size``).
+    when ``size_jitter`` > 0, its three edge scale factors (``jittered_size``). With ``cartons``
+    (``boxes.cartons`` must be set) each box is a carton of that distribution instead
+    (``pipeline.simulation.cartons.draw_carton``; type index ``len(types)``), its draws in place
+    of the type's; ``size_jitter`` does not apply.
     """
+    if cartons and boxes_cfg.cartons is None:
+        raise ValueError("cartons were asked for but boxes.cartons is not set: use boxes=cartons "
+                         "or leave the split out of generate.carton_splits")
     n = int(rng.integers(boxes_cfg.min_count, boxes_cfg.max_count + 1))
     sizes = [np.asarray(t.size, dtype=np.float64) for t in boxes_cfg.types]
     shapes = [_box_shapes(client, size) for size in sizes]
     hx, hy = drop_area(bin_cfg, physics_cfg)
     bodies: list[tuple[int, int]] = []  # (body id, type index)
     body_size: dict[int, np.ndarray] = {}
+    body_mass: dict[int, float] = {}
     steps = 0
     for i in range(n):
-        k = int(rng.integers(len(sizes)))
+        if cartons:
+            from pipeline.simulation.cartons import draw_carton
+
+            carton = draw_carton(boxes_cfg.cartons, rng)
+            k, size, mass = len(sizes), carton.size, carton.mass
+        else:
+            k = int(rng.integers(len(sizes)))
         x, y = rng.uniform(-hx, hx), rng.uniform(-hy, hy)
         q = random_quaternion(rng)
-        size = jittered_size(sizes[k], size_jitter, rng)
-        shape = shapes[k] if size_jitter == 0 else _box_shapes(client, size)
-        mass = boxes_cfg.density * float(np.prod(size))
+        if cartons:
+            shape = _box_shapes(client, size)
+        else:
+            size = jittered_size(sizes[k], size_jitter, rng)
+            shape = shapes[k] if size_jitter == 0 else _box_shapes(client, size)
+            mass = boxes_cfg.density * float(np.prod(size))
         body = p.createMultiBody(mass, shape[0], shape[1],
                                  basePosition=[x, y, physics_cfg.drop_height_above_bin_floor],
                                  baseOrientation=q.tolist(), physicsClientId=client)
@@ -189,6 +208,7 @@ def drop_heap(client: int, rng: np.random.Generator, boxes_cfg, bin_cfg, physics
                          physicsClientId=client)
         bodies.append((body, k))
         body_size[body] = size
+        body_mass[body] = float(mass)
         if i < n - 1:
             for _ in range(physics_cfg.drop_interval_steps):
                 p.stepSimulation(physicsClientId=client)
@@ -215,6 +235,6 @@ def drop_heap(client: int, rng: np.random.Generator, boxes_cfg, bin_cfg, physics
     for body, k in bodies:
         pos, quat = p.getBasePositionAndOrientation(body, physicsClientId=client)
         out.append(BoxPose(type_index=k, size=body_size[body].copy(), position=np.asarray(pos),
-                           quat_xyzw=np.asarray(quat), body_id=body))
+                           quat_xyzw=np.asarray(quat), body_id=body, mass=body_mass[body]))
     return HeapResult(boxes=out, num_dropped=n, num_removed=removed, settle_steps=steps,
                       settled=settled)

@@ -49,14 +49,15 @@ def scene_rng(base_seed: int, split_code: int, index: int) -> np.random.Generato
 
 
 def simulate_scene(client: int, cfg, rng: np.random.Generator,
-                   size_jitter: float = 0.0) -> SimulatedScene:
+                   size_jitter: float = 0.0, cartons: bool = False) -> SimulatedScene:
     """Build the cell, drop a heap, let it rest, render depth and the instance mask.
 
     ``cfg`` needs the sections ``camera``, ``bin``, ``boxes``, ``physics`` and ``sensor``;
-    ``size_jitter``: ``drop_heap``'s per-edge size scale range (0 = the types' exact sizes).
+    ``size_jitter``: ``drop_heap``'s per-edge size scale range (0 = the types' exact sizes);
+    ``cartons``: the boxes are drawn from ``boxes.cartons`` (``drop_heap``).
     """
     cell = build_cell(client, cfg.bin, cfg.physics)
-    heap = drop_heap(client, rng, cfg.boxes, cfg.bin, cfg.physics, size_jitter)
+    heap = drop_heap(client, rng, cfg.boxes, cfg.bin, cfg.physics, size_jitter, cartons)
     intr = Intrinsics.from_config(cfg.camera)
     T_world_cam = camera_pose_above_bin(cfg.camera.height_above_bin_floor)
     frame = render_depth(client, intr, T_world_cam, cfg.camera.near, cfg.camera.far,

@@ -115,3 +115,34 @@ def convergence_rows(results: list[TrialResult]) -> list[dict]:
 def finite(value):
     """NaN → None (JSON null); other values as they are."""
     return None if isinstance(value, float) and math.isnan(value) else value
+
+
+def drops_by_mass(trials: list[dict], boxes_cfg) -> list[dict]:
+    """How often the chosen pattern dropped a box, per planner, box type (by mass) and pattern,
+    from trial records (``trials.json``: each attempt's ``target_type``, ``pattern`` and
+    ``outcome``; the box under G_opt at home, the books' knowledge).
+
+    A box type's mass is ``boxes_cfg.density`` × its volume (kg). An attempt that held its box
+    (success, or a drop) counts in ``held``: drops / held is how often the pattern, once sealed,
+    failed to hold. Rows sorted by planner, then mass, then pattern (L, R, B)."""
+    mass = {str(t.name): float(boxes_cfg.density) * float(np.prod(t.size))
+            for t in boxes_cfg.types}
+    counts: dict[tuple, list[int]] = {}
+    for tr in trials:
+        for a in tr["attempts"]:
+            kind = a.get("target_type") or ""
+            if kind not in mass or a["outcome"] not in ("success", "dropped"):
+                continue
+            c = counts.setdefault((tr["planner"], kind, a["pattern"]), [0, 0])
+            c[0] += 1
+            c[1] += a["outcome"] == "dropped"
+    order = {"L": 0, "R": 1, "B": 2}
+    rows = []
+    for (planner, kind, pattern), (held, dropped) in sorted(
+            counts.items(), key=lambda kv: (kv[0][0], mass[kv[0][1]], order.get(kv[0][2], 3))):
+        lo, hi = wilson_interval(dropped, held)
+        rows.append({"planner": planner, "box": kind, "mass_kg": round(mass[kind], 3),
+                     "pattern": pattern, "held": held, "dropped": dropped,
+                     "drop_rate": round(dropped / held, 6) if held else float("nan"),
+                     "drop_ci_low": round(lo, 6), "drop_ci_high": round(hi, 6)})
+    return rows
