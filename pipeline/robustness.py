@@ -14,7 +14,10 @@ the paper's proposed fixes of its failure cases (Sec. 8.4). With the command's o
 * it runs, or reuses when their versions exist, the **noisy** pipeline:
   ``generate sensor=<robustness.sensor>`` (same heaps, same seeds; the shards hold the sensor's
   depth and the ideal depth) → ``label`` (labels from the ideal depth, so identical to the clean
-  labels) → ``train`` (the network sees noisy depth);
+  labels) → ``train`` (the network sees noisy depth). Without ``robustness.noisy_network`` no
+  second network is trained: the noisy generation holds the test split only, and every row
+  measures the network under test (``robustness.train_version``; model ``clean`` in the
+  variants), which then must serve every camera (``generate.camera_randomisation``);
 
 then measures, on the noisy generation's test split (the same heaps as the clean one):
 
@@ -99,9 +102,10 @@ class Pipelines:
     def _use(self, key: str, folder: Path) -> None:
         self.versions[key], self.dirs[key] = folder.name, folder
 
-    def build(self, train_version: str, baseline_version: str) -> None:
+    def build(self, train_version: str, baseline_version: str, noisy_network: bool) -> None:
         """The clean pipeline as it is (``compared_pair``; its train artifact's upstream label
-        and generation artifacts), then the noisy pipeline, run or reused."""
+        and generation artifacts), then the noisy pipeline, run or reused: with
+        ``noisy_network`` a full one, trained; without, the test split's heaps and labels."""
         pair = compared_pair(self.stage_dirs["baseline"].parent,
                              self.stage_dirs["train"].parent, train_version, baseline_version,
                              STAGE)
@@ -111,9 +115,18 @@ class Pipelines:
         for stage in ("label", "generate"):
             self._use(f"{stage}_clean", resolve_artifact(  # the train artifact's upstream
                 self.stage_dirs[stage].parent, stage, str(up.get(stage)), verify=True))
-        gen = self._run("generate_noisy", "generate", [f"sensor={self.sensor}"])
+        test_only = [] if noisy_network else ["generate.num_scenes=0",
+                                              "generate.num_val_scenes=0"]
+        gen = self._run("generate_noisy", "generate", [f"sensor={self.sensor}", *test_only])
         lab = self._run("label_noisy", "label", [f"label.generate_version={gen.name}"])
-        self._run("train_noisy", "train", [f"train.label_version={lab.name}"])
+        if noisy_network:
+            self._run("train_noisy", "train", [f"train.label_version={lab.name}"])
+
+    @property
+    def models(self) -> tuple[str, ...]:
+        """The networks of the study: ``clean`` (the one under test), and ``noisy`` when one was
+        trained on the sensor's depth."""
+        return ("clean", "noisy") if "train_noisy" in self.versions else ("clean",)
 
     def evaluate(self, name: str, model: str, overrides: list[str], trials: int,
                  split: str) -> Path:
@@ -164,7 +177,7 @@ def table1_rows(p: Pipelines, inputs: list[str], radius_px: float, max_images: i
     gen_dir, label_dir = p.dirs["generate_noisy"], p.dirs["label_noisy"]
     scenes = SceneDataset(gen_dir, "test")
     rows = []
-    for model in ("clean", "noisy"):
+    for model in p.models:
         planner = Planner.load(p.dirs[f"train_{model}"])
         data = GraspDataset(gen_dir, LabelSet(label_dir, "test"), "test", planner.norm,
                             planner.net.cfg.grid, limit=max_images)
@@ -190,7 +203,7 @@ def table2_rows(p: Pipelines, inputs: list[str], max_images: int, progress: bool
     gen_dir = p.dirs["generate_noisy"]
     gen = SceneDataset(gen_dir, "test")
     planners = table2.make_planners(cfg, gen, p.dirs["baseline"], None)
-    nets = {m: Planner.load(p.dirs[f"train_{m}"]) for m in ("clean", "noisy")}
+    nets = {m: Planner.load(p.dirs[f"train_{m}"]) for m in p.models}
     ours = {f"dcnn_{m}": (lambda depth, intr, i, net=net: net.plan(depth, intr))
             for m, net in nets.items()}
     planners = {**ours, **planners}
@@ -282,7 +295,12 @@ def robustness(cfg: DictConfig, overrides: list[str] | None = None) -> Path:
     for v in list(rc.closed_loop) + list(rc.policies):
         if str(v.model) not in ("clean", "noisy"):
             raise ValueError(f"robustness variant {v.name!r} has model={v.model!r}: use clean "
-                             "(trained on ideal depth) or noisy (trained on the sensor's depth)")
+                             "(the network under test) or noisy (trained on the sensor's depth, "
+                             "with robustness.noisy_network)")
+        if str(v.model) == "noisy" and not bool(rc.noisy_network):
+            raise ValueError(f"robustness variant {v.name!r} uses model=noisy but "
+                             "robustness.noisy_network is false (no second network is trained): "
+                             "use model=clean, or set robustness.noisy_network=true")
         if str(v.split) not in HEAP_STREAMS:
             raise ValueError(f"robustness variant {v.name!r} has split={v.split!r}: use dev "
                              f"({rc.closed_loop_trials} trials) or test (the evaluation's "
@@ -290,7 +308,7 @@ def robustness(cfg: DictConfig, overrides: list[str] | None = None) -> Path:
     # dev variants: the study's own count; test: the evaluation's (Table 3's heaps)
     trials = {"dev": int(rc.closed_loop_trials), "test": int(cfg.evaluate.num_trials)}
     with p.keep_latest():
-        p.build(str(rc.train_version), str(rc.baseline_version))
+        p.build(str(rc.train_version), str(rc.baseline_version), bool(rc.noisy_network))
         cl = closed_loop_rows(p, "sensor", rc.closed_loop, trials)
         cl += closed_loop_rows(p, "policy", rc.policies, trials)
     upstream = dict(sorted(p.versions.items()))

@@ -169,3 +169,45 @@ def test_smoke_study_end_to_end(smoke_pipeline, tmp_path):
         assert (out / name).is_file()
     # a rerun reuses everything: the same artifact, no stage run again
     assert robustness(cfg, base) == out
+
+
+def test_noisy_model_needs_the_noisy_network(tmp_path):
+    from pipeline.robustness import robustness
+
+    base = ["experiment=smoke", f"paths.root={tmp_path}", "robustness.noisy_network=false"]
+    cfg = compose("robustness", base)
+    assert any(str(v.model) == "noisy" for v in cfg.robustness.closed_loop)
+    with pytest.raises(ValueError, match="noisy_network is false"):
+        robustness(cfg, base)
+    assert not (tmp_path / "data").exists()
+
+
+@pytest.mark.slow
+def test_one_network_study(smoke_pipeline, tmp_path):
+    """robustness.noisy_network=false: no second network; the noisy generation holds the test
+    split only; Tables 1 and 2 and every closed-loop row measure the network under test."""
+    from conftest import smoke_overrides
+    from pipeline.artifacts import load_manifest
+    from pipeline.baseline import baseline
+    from pipeline.robustness import robustness
+
+    smoke = smoke_pipeline.copy(tmp_path / "root")
+    base = smoke_overrides(smoke.root, "baseline.epochs=1", "robustness.noisy_network=false")
+    baseline(compose("baseline", base))
+    cfg = compose("robustness", base)
+    rc = cfg.robustness
+    rc.closed_loop = [rc.closed_loop[0], rc.closed_loop[2]]  # clean_ideal, clean_sensor
+    rc.policies = [rc.policies[0]]
+    rc.table1_inputs = ["ideal", "sensor"]
+    rc.table2_inputs = ["sensor"]
+    out = robustness(cfg, base)
+    study = json.loads((out / "robustness.json").read_text())
+    up = load_manifest(out)["upstream"]
+    assert "train_noisy" not in up
+    gen = load_manifest(smoke.root / "data" / "generate" / up["generate_noisy"])
+    assert gen["config"]["generate"]["num_scenes"] == 0
+    assert gen["config"]["sensor"]["name"] == "sr300"
+    assert {r["model"] for r in study["table1"]} == {"clean"}
+    assert {r["planner"] for r in study["table2"]} >= {"dcnn_clean"}
+    assert "dcnn_noisy" not in {r["planner"] for r in study["table2"]}
+    assert [r["variant"] for r in study["closed_loop"]] == ["clean_ideal", "clean_sensor", "paper"]

@@ -575,6 +575,7 @@ class RobustnessConfig:
     """The robustness study (``pipeline.robustness``)."""
 
     sensor: str = MISSING
+    noisy_network: bool = MISSING  # also train a network on the sensor's depth (a second one)
     train_version: str = MISSING  # the clean-trained network ("latest" or a version)
     baseline_version: str = MISSING  # the baseline artifact that compared it
     table1_inputs: List[str] = MISSING

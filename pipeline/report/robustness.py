@@ -285,10 +285,13 @@ def render_robustness(info: RobustnessInfo | None, tables: dict[str, Table],
     images = sorted({integer(r.get("images")) for r in data["table1"]} - {None})
     out += [
         f"Robustness artifact `{info.version}` (`python -m pipeline.robustness`): the method on "
-        f"depth from the `{sensor}` sensor model instead of the ideal rendered depth, with a "
-        "network trained on ideal depth (*clean-trained*, train artifact "
-        f"`{arts.get('train_clean')}`) and one trained on the sensor's depth (*noisy-trained*, "
-        f"`{arts.get('train_noisy')}`). Tables 1 and 2 are measured on the test split of the "
+        f"depth from the `{sensor}` sensor model instead of the ideal rendered depth, with "
+        + (f"the network under test (*clean-trained*, train artifact `{arts.get('train_clean')}`)"
+           f" and one trained on the sensor's depth (*noisy-trained*, "
+           f"`{arts.get('train_noisy')}`)" if arts.get("train_noisy") else
+           f"the network under test alone (train artifact `{arts.get('train_clean')}`; no "
+           "network is trained for the sensor: `robustness.noisy_network=false`)")
+        + ". Tables 1 and 2 are measured on the test split of the "
         f"noisy generation artifact `{arts.get('generate_noisy')}`"
         + (f" ({', '.join(str(n) for n in images)} images)" if images else "")
         + ", the same heaps as the clean one; the labels come from the ideal depth, so they "
