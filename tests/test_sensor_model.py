@@ -41,7 +41,7 @@ def test_sr300_yaml_has_every_schema_field():
     from pipeline.config.schema import SensorConfig
 
     names = {f.name for f in fields(SensorConfig)}
-    for yaml in ("sr300", "ideal"):
+    for yaml in ("sr300", "ideal", "d435"):
         assert set(OmegaConf.load(CONF_SENSOR / f"{yaml}.yaml")) == names
 
 
@@ -418,12 +418,21 @@ def test_randomised_sensors_stay_in_their_ranges():
             lo, hi = getattr(rand, key)
             assert lo <= getattr(m, key) <= hi
         assert rand.hole_size_px[0] <= m.hole_size_px <= rand.hole_size_px[1]
-    # the SR300 profile lies inside the ranges
-    sr = sensor_cfg()
-    for key in ("noise_sigma_0", "noise_sigma_2", "noise_sigma_theta", "projector_baseline",
-                "edge_dropout_prob", "quantisation_step", "depth_bias", "depth_scale_error"):
-        lo, hi = getattr(rand, key)
-        assert lo <= getattr(sr, key) <= hi, key
+    # every camera profile lies inside the ranges
+    for name in ("sr300", "d435"):
+        sr = sensor_cfg(name)
+        for key in ("noise_sigma_0", "noise_sigma_2", "noise_sigma_theta", "projector_baseline",
+                    "edge_dropout_prob", "quantisation_step", "hole_rate", "depth_bias",
+                    "depth_scale_error", "dropout_angle_start_deg"):
+            lo, hi = getattr(rand, key)
+            assert lo <= getattr(sr, key) <= hi, (name, key)
+        # the angle where dropout is certain lies in the drawn range (the SR300's 18 deg ramp is
+        # wider than any drawn one, docs/generation.md)
+        lo = rand.dropout_angle_start_deg[0] + rand.dropout_angle_span_deg[0]
+        hi = rand.dropout_angle_start_deg[1] + rand.dropout_angle_span_deg[1]
+        assert lo <= sr.dropout_angle_deg <= hi, name
+        if sr.hole_rate > 0:
+            assert rand.hole_size_px[0] <= sr.hole_size_px <= rand.hole_size_px[1]
     import dataclasses
     with pytest.raises(ValueError, match="below 90"):
         check_randomisation(dataclasses.replace(rand, dropout_angle_span_deg=[5.0, 40.0]),
