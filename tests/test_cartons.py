@@ -119,3 +119,10 @@ def test_generated_cartons_in_train_exact_types_in_test(tmp_path):
         for b in test[i].boxes:
             assert np.allclose(b.size, types[b.type_name])
             assert b.mass == pytest.approx(400.0 * np.prod(b.size))
+    # the report's box-type table names the cartons' type without a size
+    from pipeline.report.dataset import box_types_table, dataset_stats
+
+    rows = {r[0]: r for r in box_types_table(dataset_stats(out)).rows}
+    val = SceneDataset(out, "val")
+    cartons = len(boxes) + sum(len(val[i].boxes) for i in range(len(val)))
+    assert rows["carton"][1] == "drawn per box (boxes.cartons)" and rows["carton"][2] == cartons

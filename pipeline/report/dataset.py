@@ -32,7 +32,7 @@ class DatasetStats:
     not_settled: dict[str, int]
     settle_steps: dict[str, np.ndarray]  # per split, one value per scene
     type_names: list[str]
-    type_sizes: list[list[float]]  # metres
+    type_sizes: list[list[float] | None]  # metres; None: drawn per box (boxes.cartons)
     type_boxes: np.ndarray  # (T,) boxes of each type, all splits
     type_visible_px: np.ndarray  # (T,) summed visible pixels of those boxes
     image_size: tuple[int, int]  # (W, H)
@@ -66,7 +66,8 @@ def dataset_stats(gen_dir: Path) -> DatasetStats:
             np.add.at(type_px, kinds, px)
         steps[split] = np.asarray(split_steps, dtype=np.int64)
     return DatasetStats(scenes, boxes, not_settled, steps,
-                        [t["name"] for t in types], [list(t["size"]) for t in types],
+                        [t["name"] for t in types],
+                        [list(t["size"]) if t.get("size") is not None else None for t in types],
                         type_boxes, type_px, image_size)
 
 
@@ -158,7 +159,8 @@ def box_types_table(stats: DatasetStats) -> Table:
     rows = []
     for k, name in enumerate(stats.type_names):
         n = int(stats.type_boxes[k])
-        dims = " x ".join(f"{1000 * v:g}" for v in stats.type_sizes[k])
+        dims = ("drawn per box (boxes.cartons)" if stats.type_sizes[k] is None
+                else " x ".join(f"{1000 * v:g}" for v in stats.type_sizes[k]))
         rows.append([name, dims, n,
                      round(100.0 * n / total, 1) if total else None,
                      round(float(stats.type_visible_px[k]) / n, 1) if n else None])
@@ -178,6 +180,11 @@ def render_dataset(info: DatasetInfo, tables: dict[str, Table]) -> list[str]:
     W, H = info.stats.image_size
     gen = info.config.get("generate", {})
     jitter = float(gen.get("size_jitter", 0.0))
+    cartons = (info.config.get("boxes") or {}).get("cartons")
+    carton_note = (
+        f" The {' and '.join(gen.get('carton_splits', []))} heaps' boxes are cartons drawn per "
+        "box from the carton distribution (`boxes.cartons`, docs/generation.md), type "
+        "*carton*; the size jitter applies to the other splits' types." if cartons else "")
     jitter_note = (
         f"Edge lengths are the types' nominal sizes. Not the paper's: in the "
         f"{' and '.join(gen.get('size_jitter_splits', []))} heaps each box's three edges are "
@@ -185,7 +192,7 @@ def render_dataset(info: DatasetInfo, tables: dict[str, Table]) -> list[str]:
         f"(`generate.size_jitter`, docs/generation.md); the other "
         f"splits hold the exact sizes." if jitter > 0 else
         "Every box has its type's exact size (`generate.size_jitter` = 0, the paper's three "
-        "sizes).")
+        "sizes).") + carton_note
     return [
         "## Dataset",
         "",
