@@ -166,6 +166,27 @@ def test_the_retry_memory_sees_the_heap_change_by_hand():
     assert not _memory(retry_policy="repeat").repeats(then, P, "B")
 
 
+def test_a_one_pixel_flicker_at_depth_steps_is_no_change():
+    """The box's outline one pixel wider in the new image (a sensor's flicker at a depth step:
+    every step grows by a pixel, the 3 x 3 minimum of the depth): its 474 mm perimeter, about
+    346 px at 1.37 mm a pixel, changes about 6.5 cm² of depth by the box's 52 mm, more than the
+    5 cm² threshold, but as a band one pixel thin: no change, and the failed plan stays a repeat.
+    """
+    import cv2
+
+    box = ((0.0, 0.0, 0.026), (0.145, 0.092, 0.052))
+    then = observe([box])
+    P = np.array([0.0, 0.0, 0.052])
+    mem = _memory()
+    mem.remember(then, P, "B", "collision")
+    grown = cv2.erode(then.depth_m, np.ones((3, 3), np.uint8))
+    flicker = Observation(grown, then.intrinsics, then.T_world_cam, then.joints)
+    band = (np.abs(grown - then.depth_m) > 0.005).sum() * (0.573 / 411.7) ** 2
+    assert band > 0.0005  # the band alone is over the threshold
+    assert mem.changed_area(mem.failed[0], flicker) == 0.0
+    assert mem.repeats(flicker, P, "B")
+
+
 def test_a_box_one_cup_dropped_keeps_its_single_cups_skipped():
     """An L dropped the box at P: on the same image L and R near P are repeats, B is not; once
     a neighbour 10 cm away has moved in (36 cm² changed), L and R at P stay skipped (the box is

@@ -11,10 +11,14 @@ one joint state, so the two images are pixel-aligned; another camera pose counts
 are median-filtered (5 × 5, so that a sensor's noise and single flying pixels do not count),
 and the pixels whose point lies within ``retry_neighbour_m`` of the failed point (horizontal
 distance, world frame) and whose depth differs by more than ``retry_depth_change_m`` are
-summed as area (each pixel's footprint z² / (f_x f_y)). The heap changed near the point when
-that area reaches ``retry_changed_area_m2``: a box picked, fallen, pushed or arrived there.
-A 5 mm slide of a 10 cm box edge changes about 2 × 0.1 × 0.005 = 10 cm² (its leading and
-trailing edges); the default 5 cm² is half of that.
+summed as area (each pixel's footprint z² / (f_x f_y)), leaving out changes thinner than
+3 pixels (a morphological opening of the changed pixels): on a sensor's depth the boundary of
+every depth step flickers by a pixel or two between images, and along the edges of a whole
+heap that alone exceeded the threshold, so the heap always looked changed and a failed plan was
+retried unchanged. The heap changed near the point when that area reaches
+``retry_changed_area_m2``: a box picked, fallen, pushed or arrived there. A 5 mm slide of a
+10 cm box edge changes about 2 × 0.1 × 0.005 = 10 cm² (its leading and trailing edges, each
+about 3.4 pixels wide at 0.6 m); the default 5 cm² is half of that.
 
 **A box one cup could not hold** (``evaluate.retry_drop_single_cup``): after a single cup
 (L or R) dropped a box, single-cup plans within ``retry_same_point_m`` of that point stay
@@ -103,6 +107,9 @@ class RetryMemory:
         near = np.hypot(world[..., 0] - f.point[0], world[..., 1] - f.point[1]) <= self.radius_m
         both = (now > 0) & (then > 0) & near
         changed = both & (np.abs(now - then) > self.depth_change_m)
+        # a change thinner than 3 pixels is a sensor's flicker at depth steps, not a moved box
+        changed = cv2.morphologyEx(changed.astype(np.uint8), cv2.MORPH_OPEN,
+                                   np.ones((3, 3), np.uint8)).astype(bool)
         intr = obs.intrinsics
         return float(np.sum(now[changed].astype(np.float64) ** 2) / (intr.fx * intr.fy))
 
