@@ -115,11 +115,11 @@ def generate_shard(task: ShardTask) -> ShardSummary:
     randomised = bool(rand.enabled) and task.split in rand.splits
     keep_clean = stores_clean_depth(cfg)
     intr = Intrinsics.from_config(cfg.camera)
+    cartons = cfg.boxes.cartons is not None and task.split in cfg.generate.carton_splits
+    jitter = (cfg.generate.size_jitter
+              if task.split in cfg.generate.size_jitter_splits and not cartons else 0.0)
     for index in range(task.first, task.first + task.count):
         seed = (cfg.seed, SPLIT_CODES[task.split], index)
-        cartons = cfg.boxes.cartons is not None and task.split in cfg.generate.carton_splits
-        jitter = (cfg.generate.size_jitter
-                  if task.split in cfg.generate.size_jitter_splits and not cartons else 0.0)
         scene = simulate_scene(_CLIENT, cfg, scene_rng(*seed), size_jitter=jitter,
                                cartons=cartons)
         depth = scene.depth_m
@@ -269,9 +269,14 @@ def check_size_jitter(gcfg) -> None:
     if not 0 <= float(gcfg.size_jitter) < 1:
         raise ValueError(f"generate.size_jitter must be in [0, 1) (a fraction of each edge), got "
                          f"{gcfg.size_jitter}; 0 keeps the box types' exact sizes")
-    unknown = sorted(set(gcfg.size_jitter_splits) - set(SPLITS))
+    check_splits("generate.size_jitter_splits", gcfg.size_jitter_splits)
+
+
+def check_splits(key: str, names) -> None:
+    """``names`` (the config's ``key``) are all splits of ``SPLITS``."""
+    unknown = sorted(set(names) - set(SPLITS))
     if unknown:
-        raise ValueError(f"generate.size_jitter_splits has {unknown}: choose from {list(SPLITS)}")
+        raise ValueError(f"{key} has {unknown}: choose from {list(SPLITS)}")
 
 
 def generate(cfg: DictConfig) -> Path:
@@ -283,12 +288,12 @@ def generate(cfg: DictConfig) -> Path:
     if not cfg_obj.boxes.types:
         raise ValueError("boxes.types is empty: the box set needs at least one box type")
     check_size_jitter(cfg_obj.generate)
-    unknown = sorted(set(cfg_obj.generate.carton_splits) - set(SPLITS))
-    if unknown:
-        raise ValueError(f"generate.carton_splits has {unknown}: choose from {list(SPLITS)}")
+    check_splits("generate.carton_splits", cfg_obj.generate.carton_splits)
     if cfg_obj.boxes.cartons is not None:
         check_cartons(cfg_obj.boxes.cartons)
-    check_randomisation(cfg_obj.generate.camera_randomisation, SPLITS)
+    check_splits("generate.camera_randomisation.splits",
+                 cfg_obj.generate.camera_randomisation.splits)
+    check_randomisation(cfg_obj.generate.camera_randomisation)
     check_renderer(cfg_obj.camera.renderer)
     workers = resolve_workers(cfg_obj.generate.workers, cfg_obj.executor)
 

@@ -125,6 +125,13 @@ class SuctionModelConfig:
     quality_threshold: float
 
 
+def box_mass(box, density: float) -> float:
+    """A box's mass, kg: its own ``mass`` where it has one (cartons drawn per box), else
+    ``density`` (kg/m³) × the volume of its ``size`` (3,) m."""
+    mass = getattr(box, "mass", None)
+    return float(mass) if mass is not None else float(density) * float(np.prod(box.size))
+
+
 def suction_model_config(cfg, density: float) -> SuctionModelConfig:
     """The suction contact model of a composed config: ``conf/suction/`` with the cup radius
     (``hand.cup_diameter`` / 2), g (``|physics.gravity|``) and the boxes' ``density`` (kg/m³:
@@ -355,9 +362,7 @@ def evaluate_contacts(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m: np.
     occluded = occluded_contacts(pts, b + 1, depth_m, mask, intrinsics, cfg)
 
     # Rule 4: the box's weight against the soft contact's wrench limits.
-    box_mass = np.array([b_.mass if getattr(b_, "mass", None) is not None
-                         else cfg.density * float(np.prod(b_.size)) for b_ in boxes])  # (B,)
-    mass = box_mass[b]  # (M,)
+    mass = np.array([box_mass(x, cfg.density) for x in boxes])[b]  # (M,)
     wrench = wrench_failures(mass, centre[b], hit0, a_on, g_dir, cfg)
     return record_rules(out, on, b + 1, off_face, uneven, occluded, wrench)
 

@@ -23,7 +23,7 @@ import numpy as np
 
 from pipeline.config.build import from_section
 from pipeline.dataset.scenes import Box, Scene
-from pipeline.dexnet.contact import SuctionModelConfig, suction_model_config
+from pipeline.dexnet.contact import SuctionModelConfig, box_mass, suction_model_config
 from pipeline.labelling.hand import camera_centre, hand_label
 from pipeline.labelling.surfaces import (
     SurfaceDetectionConfig, detect_surfaces, match_surfaces, true_visible_faces,
@@ -58,9 +58,7 @@ def pattern_holds(surface: Surface, hl: HandLabel, box: Box, T_world_cam: np.nda
     else:
         points = c[None]
     gravity_cam = T_world_cam[:3, :3].T @ np.array([0.0, 0.0, -suction.gravity])
-    mass = box.mass if getattr(box, "mass", None) is not None else \
-        suction.density * float(np.prod(box.size))
-    return hold_test(mass, box.T_cam_box[:3, 3], points, -n, gravity_cam, suction,
+    return hold_test(box_mass(box, suction.density), box.T_cam_box[:3, 3], points, -n, gravity_cam, suction,
                      cup_offset).ok
 
 

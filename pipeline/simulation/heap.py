@@ -13,6 +13,7 @@ import numpy as np
 import pybullet as p
 
 from pipeline.camera.geometry import rotation_matrices
+from pipeline.simulation.cartons import draw_carton
 
 
 @dataclass
@@ -186,20 +187,16 @@ def drop_heap(client: int, rng: np.random.Generator, boxes_cfg, bin_cfg, physics
     steps = 0
     for i in range(n):
         if cartons:
-            from pipeline.simulation.cartons import draw_carton
-
             carton = draw_carton(boxes_cfg.cartons, rng)
             k, size, mass = len(sizes), carton.size, carton.mass
         else:
             k = int(rng.integers(len(sizes)))
         x, y = rng.uniform(-hx, hx), rng.uniform(-hy, hy)
         q = random_quaternion(rng)
-        if cartons:
-            shape = _box_shapes(client, size)
-        else:
+        if not cartons:  # drawn after the pose, as before cartons existed
             size = jittered_size(sizes[k], size_jitter, rng)
-            shape = shapes[k] if size_jitter == 0 else _box_shapes(client, size)
             mass = boxes_cfg.density * float(np.prod(size))
+        shape = shapes[k] if not cartons and size_jitter == 0 else _box_shapes(client, size)
         body = p.createMultiBody(mass, shape[0], shape[1],
                                  basePosition=[x, y, physics_cfg.drop_height_above_bin_floor],
                                  baseOrientation=q.tolist(), physicsClientId=client)
