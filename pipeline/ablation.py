@@ -3,7 +3,9 @@
     python -m pipeline.ablation [experiment=default] [ablation.planners=[oracle,dcnn]]
 
 Each variant of ``ablation.variants`` (``conf/stage/ablation.yaml``) is one run of the evaluation
-stage with the variant's overrides, for each planner of ``ablation.planners`` and
+stage with the variant's overrides, for each planner of ``ablation.planners`` (or only
+those ``ablation.variant_planners`` names for it, where its overrides cannot change the others'
+trials) and
 ``ablation.trials`` trials, on the ``dev`` heaps (the ablation is development; the report's
 Table 3 is measured on ``test``, which nothing is chosen on; the heaps depend only on ``seed``,
 the split and the trial index). Every run is an evaluation artifact of its own (reused when its
@@ -61,6 +63,8 @@ def run_variants(cfg: DictConfig, base: list[str]) -> list[dict]:
     with keep_latest([data_root(cfg) / "evaluate"]):
         for planner in ab.planners:
             for v in ab.variants:
+                if planner not in ab.variant_planners.get(v.name, [planner]):
+                    continue  # the variant does not change this planner's trials
                 overrides = [str(o) for o in v.overrides]
                 extra = [f"planner={planner}", f"evaluate.num_trials={int(ab.trials)}",
                          f"evaluate.split={SPLIT}", *overrides]
@@ -92,6 +96,11 @@ def ablation(cfg: DictConfig, overrides: list[str] | None = None) -> Path:
     names = [str(v.name) for v in ab.variants]
     if len(set(names)) != len(names):
         raise ValueError(f"ablation.variants has repeated names: {names}; give each its own")
+    for name, planners in ab.variant_planners.items():
+        for planner in planners:
+            if str(planner) not in PLANNERS:
+                raise ValueError(f"ablation.variant_planners.{name} has {planner!r}: choose "
+                                 f"from {', '.join(PLANNERS)}")
     base = scale_overrides(cfg, overrides)
     rows = run_variants(cfg, base)
     upstream = {f"{r['planner']}/{r['variant']}": r["evaluate_version"] for r in rows}

@@ -83,6 +83,7 @@ from pipeline.planner.loss import LossConfig, grasp_loss, loss_config
 from pipeline.planner.network import GraspNet, count_flops, count_parameters, network_config
 from pipeline.planner.numerics import set_training_numerics
 from pipeline.planner.planner import MODEL_FILE, Planner, pick_device, ranking_config
+from pipeline.planner.schedule import learning_rate, schedule_config
 from pipeline.planner.scoring import EVAL_BATCH, ranked_images, table1
 from pipeline.tracking import StageLog
 
@@ -273,8 +274,10 @@ def train(cfg: DictConfig) -> Path | None:
     upstream = {"label": label_dir.name, "generate": gen_dir.name}
     version = compute_version(STAGE, config, upstream)
     resume_config = copy.deepcopy(config)
-    # Neither the epoch budget, the stopping rule nor th changes an epoch's weights.
-    for key in ("epochs", "patience", "threshold", "threshold_grid"):
+    # Neither the epoch budget, the stopping rule nor th changes an epoch's weights (the epoch
+    # budget does when the rate follows a schedule over the whole run).
+    for key in (("epochs",) if cfg.train.schedule.name == "constant" else ()) + (
+            "patience", "threshold", "threshold_grid"):
         resume_config["train"].pop(key)
     resume_dir = Path(cfg.paths.models) / STAGE / (RESUME_PREFIX + compute_version(
         STAGE + "-resume", resume_config, upstream, code_of=STAGE))
@@ -285,6 +288,7 @@ def train(cfg: DictConfig) -> Path | None:
     net_cfg, norm = network_config(cfg), normalisation(cfg)
     loss_cfg = loss_config(cfg)
     batch = int(tc.batch_size)
+    schedule = schedule_config(cfg)
     # channels_last: the same arithmetic in another memory layout (faster convolutions on CPU).
     memory_format = torch.channels_last if bool(tc.channels_last) else torch.contiguous_format
     if batch < ctx.world_size:
@@ -302,7 +306,7 @@ def train(cfg: DictConfig) -> Path | None:
         torch.set_num_threads(max(1, int(tc.num_threads) // ctx.local_world_size))
         torch.manual_seed(seed)
         net = GraspNet(net_cfg).to(run_device, memory_format=memory_format)
-        opt = torch.optim.Adam(net.parameters(), lr=float(tc.lr),
+        opt = torch.optim.Adam(net.parameters(), lr=schedule.lr,  # set before every step
                                betas=tuple(float(b) for b in tc.betas))
         return net, opt
 
@@ -317,6 +321,7 @@ def train(cfg: DictConfig) -> Path | None:
                 model, device_ids=[run_device.index] if run_device.type == "cuda" else None)
         images_done, train_s = 0, 0.0
         n = len(train_set)
+        total_steps = int(tc.epochs) * math.ceil(n / batch)  # one per global batch
         for epoch in range(start_epoch, int(tc.epochs)):
             if distributed.broadcast(ctx, should_stop(history["val_loss"], int(tc.patience))
                                      if ctx.is_main else None):
@@ -329,6 +334,8 @@ def train(cfg: DictConfig) -> Path | None:
             bar = tqdm(zip(loader, weights), total=len(batches), unit="batch",
                        desc=f"train epoch {epoch + 1}/{tc.epochs}", disable=not progress)
             for s, ((x, targets), weight) in enumerate(bar):
+                for group in opt.param_groups:
+                    group["lr"] = learning_rate(epoch * len(batches) + s, total_steps, schedule)
                 loss = grasp_loss(model(x.to(run_device, memory_format=memory_format)), targets,
                                   loss_cfg)
                 if not torch.isfinite(loss["total"]):

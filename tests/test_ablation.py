@@ -20,6 +20,8 @@ def test_bad_planner_and_repeated_names_are_refused_before_any_work(smoke_cfg, t
     cfg.ablation.variants = [cfg.ablation.variants[0], cfg.ablation.variants[0]]
     with pytest.raises(ValueError, match="repeated names"):
         ablation(cfg)
+    with pytest.raises(ValueError, match="variant_planners.no_gate has 'robot'"):
+        ablation(smoke_cfg("ablation", "+ablation.variant_planners.no_gate=[robot]"))
     assert not (tmp_path / "data").exists()
 
 
@@ -36,7 +38,10 @@ def test_smoke_ablation_end_to_end(tmp_path):
     first = evaluate(compose("evaluate", base + ["planner=oracle"]))  # as make reproduce leaves it
     cfg = compose("ablation", base + ["ablation.planners=[oracle]"])  # the DCNN needs a network
     by_name = {str(v.name): v for v in cfg.ablation.variants}
-    cfg.ablation.variants = [by_name["all_on"], by_name["no_path_check"]]
+    # no_fallback_tier runs for the DCNN alone (the oracle has no second tier): no row here
+    assert list(cfg.ablation.variant_planners.no_fallback_tier) == ["dcnn"]
+    cfg.ablation.variants = [by_name["all_on"], by_name["no_fallback_tier"],
+                             by_name["no_path_check"]]
     out = ablation(cfg, base)
     latest = tmp_path / "data" / "evaluate" / "latest"
     assert latest.resolve() == first.resolve()

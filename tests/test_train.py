@@ -83,6 +83,37 @@ def test_resume_matches_uninterrupted(labelled_root):
     assert load_manifest(resumed)["timings"]["epochs_run_here"] == 1
 
 
+ONECYCLE = ("train.schedule.name=onecycle", "train.patience=0")
+
+
+def test_onecycle_resumes_on_the_same_curve(labelled_root, monkeypatch):
+    fresh = train(_cfg("train", _fresh_models(labelled_root, "oc-fresh"), "train.epochs=2",
+                       *ONECYCLE))
+    # A run killed after its first epoch (the checkpoint of epoch 1 written) ...
+    root = _fresh_models(labelled_root, "oc-killed")
+    real = __import__("pipeline.train", fromlist=["should_stop"]).should_stop
+
+    def crash_after_one(val_loss, patience):
+        if len(val_loss) == 1:
+            raise KeyboardInterrupt
+        return real(val_loss, patience)
+
+    monkeypatch.setattr("pipeline.train.should_stop", crash_after_one)
+    with pytest.raises(KeyboardInterrupt):
+        train(_cfg("train", root, "train.epochs=2", *ONECYCLE))
+    monkeypatch.setattr("pipeline.train.should_stop", real)
+    # ... continues on the same learning-rate curve and writes the same weights
+    resumed = train(_cfg("train", root, "train.epochs=2", *ONECYCLE))
+    assert load_manifest(resumed)["timings"]["epochs_run_here"] == 1
+    assert sha256_file(resumed / "model.pt") == sha256_file(fresh / "model.pt")
+    # The curve depends on the epoch budget: a 1-epoch run is not resumed by a 2-epoch one.
+    other = _fresh_models(labelled_root, "oc-budget")
+    train(_cfg("train", other, "train.epochs=1", *ONECYCLE))
+    again = train(_cfg("train", other, "train.epochs=2", *ONECYCLE))
+    assert load_manifest(again)["timings"]["epochs_run_here"] == 2
+    assert sha256_file(again / "model.pt") == sha256_file(fresh / "model.pt")
+
+
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU")
 def test_train_on_cuda(labelled_root):
     """The smoke training on a GPU: its own version (the device type is part of the key), a

@@ -18,7 +18,7 @@ floor's top surface), camera (OpenCV: x right, y down, z forward along the optic
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import List, Optional
+from typing import Dict, List, Optional
 
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING
@@ -344,6 +344,17 @@ class RankingSchema:
 
 
 @dataclass
+class ScheduleSchema:
+    """``train.schedule`` (``pipeline.planner.schedule.ScheduleConfig`` documents each field)."""
+
+    name: str = MISSING  # "constant" (the paper) | "onecycle"
+    max_lr: float = MISSING  # onecycle: the peak rate
+    warmup_fraction: float = MISSING  # onecycle: share of the steps rising to max_lr
+    div_factor: float = MISSING  # onecycle: first rate = max_lr / div_factor
+    final_div_factor: float = MISSING  # onecycle: last rate = first rate / final_div_factor
+
+
+@dataclass
 class TrainConfig:
     """The training stage (``pipeline.train``) and what it stores for the planner."""
 
@@ -351,7 +362,8 @@ class TrainConfig:
     epochs: int = MISSING  # the most epochs; fewer when validation-based stopping ends it
     patience: int = MISSING  # stop after this many epochs without a lower val loss (0: never)
     batch_size: int = MISSING  # paper Sec. 6
-    lr: float = MISSING  # Adam, paper Sec. 6
+    lr: float = MISSING  # Adam, paper Sec. 6 (the constant schedule's rate)
+    schedule: ScheduleSchema = MISSING  # the rate over the run (``pipeline.planner.schedule``)
     betas: List[float] = MISSING
     alpha: float = MISSING  # focal loss, Sec. 4.1
     gamma: float = MISSING
@@ -619,6 +631,9 @@ class AblationConfig:
     planners: List[str] = MISSING
     trials: int = MISSING
     variants: List[AblationVariant] = MISSING
+    # variant name -> the only planners it runs for (its overrides cannot change the others'
+    # trials, which would repeat their all_on rows); a variant not named runs for every planner
+    variant_planners: Dict[str, List[str]] = MISSING
     force: bool = MISSING
 
 
@@ -636,6 +651,8 @@ class ReportConfig:
     ablation_version: str = MISSING  # no ablation artifact at all: the report leaves it out
     unseen_version: str = MISSING  # no unseen-size artifact at all: the report leaves it out
     num_sample_images: int = MISSING
+    # min per stage of `make reproduce` (docs/performance.md), shown beside run_time.csv's times
+    run_time_budget_min: Dict[str, float] = MISSING
     force: bool = MISSING
 
 

@@ -2,12 +2,14 @@
 
 Every artifact's manifest records the wall-clock seconds of the run that made it
 (``timings.total_s``; a run resumed after an interruption records its last part only). This
-table sums them per stage over every artifact the report reads and, following each manifest's
-``upstream`` versions, every artifact those were made from (a study's noisy pipeline, the
-ablation's and the robustness study's evaluations, the unseen-size heaps). Each artifact counts
-once, however many artifacts were made from it. With the stages run one after another on one
-machine, as ``make reproduce`` runs them, the total is the time they took (the set-up and the
-report itself aside).
+table sums them per stage of ``make reproduce``: each reported artifact with, following the
+manifests' ``upstream`` versions, every artifact it was made from that no earlier stage made
+(the ablation's evaluations count as the ablation, the robustness study's noisy pipeline and
+evaluations as the robustness study, the unseen-size heaps and their trials as the unseen
+stage). Each artifact counts once, however many artifacts were made from it. With the stages
+run one after another on one machine, as ``make reproduce`` runs them, the total is the time
+they took (the set-up and the report itself aside). Beside each stage: its share of the total
+and its budget (``report.run_time_budget_min``, docs/performance.md).
 """
 
 from __future__ import annotations
@@ -73,9 +75,34 @@ def run_time_rows(manifests: dict[str, dict]) -> list[dict]:
     return rows + [total] if rows else []
 
 
-def run_time_table(roots: Iterable[Path], versions: Iterable[str]) -> Table:
-    """The run-time table of the artifacts ``versions`` and those they were made from."""
-    rows = run_time_rows(made_from(roots, versions))
-    return Table("run_time", ["stage", "artifacts", "wall-clock (min)", "without a time"],
-                 [[r["stage"], r["artifacts"], r["seconds"] / 60.0, r["untimed"]] for r in rows],
-                 ["", "{}", "{:.1f}", "{}"], csv_formats=["", "{}", "{:.2f}", "{}"])
+def by_stage(roots: Iterable[Path], reported: dict[str, str]) -> dict[str, dict]:
+    """``{version: manifest}`` of each artifact the report reads or was made from, each under
+    ``stage`` = the reported stage (``reported``: stage -> version) that first reaches it, stages
+    in ``STAGE_ORDER``; the manifest copies carry that stage as ``stage``."""
+    order = {s: i for i, s in enumerate(STAGE_ORDER)}
+    out: dict[str, dict] = {}
+    for stage in sorted(reported, key=lambda s: (order.get(s, len(order)), s)):
+        for version, manifest in made_from(roots, [reported[stage]]).items():
+            out.setdefault(version, {**manifest, "stage": stage})
+    return out
+
+
+def run_time_table(roots: Iterable[Path], reported: dict[str, str],
+                   budget_min: dict[str, float] | None = None) -> Table:
+    """The run-time table of the reported artifacts (stage -> version) and those they were made
+    from, per stage of ``make reproduce``, with each stage's share of the total and its budget
+    (min; none: no budget)."""
+    rows = run_time_rows(by_stage(roots, reported))
+    budget_min = budget_min or {}
+    total = rows[-1]["seconds"] if rows else 0.0
+    budgets = [budget_min.get(r["stage"]) for r in rows[:-1]]
+    if rows:
+        budgets.append(sum(b for b in budgets if b is not None) if any(
+            b is not None for b in budgets) else None)
+    return Table("run_time", ["stage", "artifacts", "wall-clock (min)", "share (%)",
+                              "budget (min)", "without a time"],
+                 [[r["stage"], r["artifacts"], r["seconds"] / 60.0,
+                   100.0 * r["seconds"] / total if total > 0 else None, b, r["untimed"]]
+                  for r, b in zip(rows, budgets)],
+                 ["", "{}", "{:.1f}", "{:.0f}", "{:g}", "{}"],
+                 csv_formats=["", "{}", "{:.2f}", "{:.1f}", "{}", "{}"])

@@ -85,7 +85,8 @@ def report(cfg: DictConfig) -> Path:
         tables: dict[str, Table] = {}
         for section, info in built:
             tables.update((t.name, t) for t in section.tables(info, ctx))
-        run_time = run_time_table((ctx.root, ctx.models), upstream.values())
+        run_time = run_time_table((ctx.root, ctx.models), upstream,
+                                  dict(cfg.report.run_time_budget_min))
         tables[run_time.name] = run_time
         for t in tables.values():
             path = run.work_dir / "tables" / f"{t.name}.csv"
