@@ -273,10 +273,11 @@ def train(cfg: DictConfig) -> Path | None:
         config["train"]["world_size"] = ctx.world_size
     upstream = {"label": label_dir.name, "generate": gen_dir.name}
     version = compute_version(STAGE, config, upstream)
+    schedule = schedule_config(cfg)  # validated before it names the resume folder
     resume_config = copy.deepcopy(config)
     # Neither the epoch budget, the stopping rule nor th changes an epoch's weights (the epoch
     # budget does when the rate follows a schedule over the whole run).
-    for key in (("epochs",) if cfg.train.schedule.name == "constant" else ()) + (
+    for key in (("epochs",) if schedule.name == "constant" else ()) + (
             "patience", "threshold", "threshold_grid"):
         resume_config["train"].pop(key)
     resume_dir = Path(cfg.paths.models) / STAGE / (RESUME_PREFIX + compute_version(
@@ -288,7 +289,6 @@ def train(cfg: DictConfig) -> Path | None:
     net_cfg, norm = network_config(cfg), normalisation(cfg)
     loss_cfg = loss_config(cfg)
     batch = int(tc.batch_size)
-    schedule = schedule_config(cfg)
     # channels_last: the same arithmetic in another memory layout (faster convolutions on CPU).
     memory_format = torch.channels_last if bool(tc.channels_last) else torch.contiguous_format
     if batch < ctx.world_size:

@@ -86,6 +86,13 @@ def test_resume_matches_uninterrupted(labelled_root):
 ONECYCLE = ("train.schedule.name=onecycle", "train.patience=0")
 
 
+def test_a_bad_schedule_is_refused_before_any_folder(labelled_root):
+    root = _fresh_models(labelled_root, "bad-schedule")
+    with pytest.raises(ValueError, match="train.schedule.name='cyclic'"):
+        train(_cfg("train", root, "train.schedule.name=cyclic"))
+    assert not (root / "models").exists()  # no resume folder named by the bad name
+
+
 def test_onecycle_resumes_on_the_same_curve(labelled_root, monkeypatch):
     fresh = train(_cfg("train", _fresh_models(labelled_root, "oc-fresh"), "train.epochs=2",
                        *ONECYCLE))
