@@ -33,6 +33,7 @@ run finished, rebuilding their summaries from the files and from each shard's ac
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import time
@@ -86,6 +87,34 @@ class LabelSummary:
 
 _STATE: dict = {}
 
+HOLD_MASSES = ("own", "heaviest")
+
+
+def check_hold_mass(cfg) -> str:
+    """``label.hold_mass``, validated: ``own`` or ``heaviest`` (the latter needs the carton
+    distribution, ``boxes=cartons``)."""
+    mode = str(cfg.label.hold_mass)
+    if mode not in HOLD_MASSES:
+        raise ValueError(f"label.hold_mass is {mode!r}: choose from {HOLD_MASSES}")
+    if mode == "heaviest" and getattr(cfg.boxes, "cartons", None) is None:
+        raise ValueError("label.hold_mass=heaviest weighs a carton as the heaviest of its size "
+                         "in boxes.cartons, and this box set has none: use boxes=cartons, or "
+                         "label.hold_mass=own")
+    return mode
+
+
+def weighed_for_hold(scene, cfg):
+    """``scene`` with each drawn carton's mass as the hold check weighs it (``label.hold_mass``:
+    its own, or the heaviest of its size that ``boxes.cartons`` draws); boxes without a drawn
+    mass (a fixed set, weighed at its density) are left as they are."""
+    if check_hold_mass(cfg) == "own":
+        return scene
+    from pipeline.simulation.cartons import heaviest_mass
+
+    boxes = [b if b.mass is None else dataclasses.replace(
+        b, mass=heaviest_mass(cfg.boxes.cartons, b.size)) for b in scene.boxes]
+    return dataclasses.replace(scene, boxes=boxes)
+
 
 def _init_worker(cfg_obj, gen_dir: str) -> None:
     _STATE.clear()
@@ -103,7 +132,7 @@ def label_shard(task: LabelTask) -> LabelSummary:
     cols: dict[str, list] = {}
     per_scene = []
     for index in range(task.first, task.first + task.count):
-        scene = ds[index]
+        scene = weighed_for_hold(ds[index], cfg)
         rows, match, ts, tr = label_scene(scene, cfg, _STATE.get("robot"), ds.bin,
                                           density=float(cfg.boxes.density))
         summary.surface_s += ts
@@ -235,6 +264,7 @@ def _log_scene(log: StageLog, scene: Scene, rows: dict, log_index: int, robot=No
 
 def label(cfg: DictConfig) -> Path:
     """Run the labelling stage on a generation artifact; returns the label artifact folder."""
+    check_hold_mass(cfg)
     gen_dir = resolve_artifact(data_root(cfg), "generate", cfg.label.generate_version,
                                verify=True, key="label.generate_version")
     config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)

@@ -126,3 +126,39 @@ def test_generated_cartons_in_train_exact_types_in_test(tmp_path):
     val = SceneDataset(out, "val")
     cartons = len(boxes) + sum(len(val[i].boxes) for i in range(len(val)))
     assert rows["carton"][1] == "drawn per box (boxes.cartons)" and rows["carton"][2] == cartons
+
+
+def test_heaviest_mass_by_hand(cfg):
+    """Density 100-700 kg/m³, max_mass 1.7 kg: a 10 cm cube (1 l) weighs at most 0.7 kg; a
+    20 x 15 x 10 cm carton (3 l) would weigh 2.1 kg at 700 and is capped at the payload."""
+    from pipeline.simulation.cartons import heaviest_mass
+
+    c = cfg.boxes.cartons
+    assert (list(c.density), c.max_mass) == ([100.0, 700.0], 1.7)
+    assert heaviest_mass(c, [0.1, 0.1, 0.1]) == pytest.approx(0.7)
+    assert heaviest_mass(c, [0.2, 0.15, 0.1]) == pytest.approx(1.7)
+
+
+def test_hold_mass_heaviest_weighs_drawn_cartons_only(cfg):
+    """label.hold_mass=heaviest: a drawn carton of 12 x 10 x 5 cm (0.6 l) is weighed at
+    700 × 0.0006 = 0.42 kg, whatever it drew; a box of a fixed set (no mass) is left alone;
+    own leaves every box as it is; a box set without cartons is refused, with the fix named."""
+    from pipeline.dataset.scenes import Box
+    from pipeline.label import weighed_for_hold
+
+    eye = np.eye(4)
+    carton = Box(1, -1, "carton", np.array([0.12, 0.10, 0.05]), eye, eye, mass=0.1)
+    paper = Box(2, 0, "medium", np.array([0.145, 0.092, 0.052]), eye, eye)
+    scene = dataclasses.make_dataclass("S", [("boxes", list)])([carton, paper])
+    heavy = dataclasses.replace(cfg, label=dataclasses.replace(cfg.label, hold_mass="heaviest"))
+    out = weighed_for_hold(scene, heavy)
+    assert out.boxes[0].mass == pytest.approx(0.42) and out.boxes[1].mass is None
+    assert scene.boxes[0].mass == 0.1  # the scene itself is not changed
+    assert weighed_for_hold(scene, cfg) is scene  # own, the default
+    paper_cfg = OmegaConf.to_object(compose("label", ["experiment=smoke",
+                                                      "label.hold_mass=heaviest"]))
+    with pytest.raises(ValueError, match="use boxes=cartons"):
+        weighed_for_hold(scene, paper_cfg)
+    bad = dataclasses.replace(cfg, label=dataclasses.replace(cfg.label, hold_mass="light"))
+    with pytest.raises(ValueError, match="choose from"):
+        weighed_for_hold(scene, bad)

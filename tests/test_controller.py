@@ -3,6 +3,8 @@ planner interface, by hand, on depth images drawn without a simulated world."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import subprocess
 import sys
 from pathlib import Path
@@ -14,6 +16,7 @@ import pytest
 from pipeline.camera.geometry import Intrinsics, camera_pose_above_bin, pose_matrix
 from pipeline.camera.raycast import BoxShape, raycast_boxes
 from pipeline.controller.heap_model import (HeapCollider, HeapModel, HeapModelConfig,
+                                            agreeing_neighbours,
                                             build_heightmap, fill_unknown)
 from pipeline.controller.observation import Observation
 from pipeline.controller.planning import Grasp, PlannerError, checked_grasps, load_plugin
@@ -22,7 +25,8 @@ REPO = Path(__file__).resolve().parents[1]
 INTR = Intrinsics(416, 416, 411.7, 411.7, 207.5, 207.5)
 HOME = camera_pose_above_bin(0.625)
 BIN = SimpleNamespace(inner_length_x=0.40, inner_width_y=0.30)
-HEAP = HeapModelConfig(cell_m=0.005, bin_tolerance_m=0.004)
+HEAP = HeapModelConfig(cell_m=0.005, bin_tolerance_m=0.004, flying_tolerance_m=0.01,
+                       flying_min_neighbours=4)
 
 
 def observe(boxes, T=HOME) -> Observation:
@@ -65,6 +69,50 @@ def test_heightmap_of_a_box_by_hand():
     np.testing.assert_allclose(m.heights[inside], 0.052, atol=1e-4)
     assert (m.heights[outside] == 0).all()
     assert inside.sum() > 200 and outside.sum() > 3000
+
+
+def test_agreeing_neighbours_by_hand():
+    """A 4 x 4 plane at 0.60 m, a step to 0.50 m in its right column, a spike of 0.55 m at
+    (1, 1), rows and columns beyond the border replicating the image's own. The spike agrees
+    with none of its 8 neighbours (all 5 cm away); (1, 0) on the plane with all but the spike
+    (its 3 left neighbours are the border's copies of column 0)."""
+    d = np.full((4, 4), 0.60)
+    d[:, 3] = 0.50
+    d[1, 1] = 0.55
+    n = agreeing_neighbours(d, 0.01)
+    assert n[1, 1] == 0
+    assert n[1, 0] == 7
+    # (0, 2): neighbours (-1, 1..3) replicate row 0 = 0.60, 0.60, 0.50; (0, 1) 0.60, (0, 3)
+    # 0.50; (1, 1) the spike, (1, 2) 0.60, (1, 3) 0.50: agreeing 0.60s = 4
+    assert n[0, 2] == 4
+    # the step column: (2, 3) has (1, 3), (3, 3) and the 3 replicated to its right: 5
+    assert n[2, 3] == 5
+    d[3, 0] = 0.0  # no depth: no agreement, and it agrees with nobody
+    assert agreeing_neighbours(d, 0.01)[3, 0] == 0
+    # (2, 0) loses (3, 0) and its copy beyond the left border, (3, -1): 7 - 2
+    assert n[2, 0] == 7 and agreeing_neighbours(d, 0.01)[2, 0] == 5
+
+
+def test_flying_pixels_beside_a_box_are_dropped_not_its_faces():
+    """Mixed pixels along one edge of the box of the test above (depths halfway between its top
+    and the floor, alternating a little as a real camera's do) would stand as columns beside it;
+    the flying-pixel step drops them, and leaves the ideal image's model as it was."""
+    box = [((0.05, -0.03, 0.026), (0.145, 0.092, 0.052))]
+    obs = observe(box)
+    clean = build_heightmap(obs, BIN, HEAP)
+    off = HeapModelConfig(0.005, 0.004, 0.0, 4)
+    np.testing.assert_array_equal(clean.heights, build_heightmap(obs, BIN, off).heights)
+    depth = obs.depth_m.copy()
+    top, floor = float(depth.min()), float(depth.max())
+    rows = np.nonzero((depth[:, :-1] < top + 1e-3) & (depth[:, 1:] > floor - 0.02))
+    assert len(rows[0]) > 20  # the box's right edge, one pixel per image row
+    u = rows[1] + 1  # the first floor pixel right of the top
+    depth[rows[0], u] = top + (floor - top) * np.where(rows[0] % 2, 0.3, 0.6)
+    mixed = dataclasses.replace(obs, depth_m=depth)
+    assert build_heightmap(mixed, BIN, off).heights.max() > 0.052 - 1e-4  # columns: as high
+    raised = build_heightmap(mixed, BIN, off).heights > clean.heights + 0.005
+    assert raised.sum() >= 5  # cells beside the edge stand up without the step
+    np.testing.assert_array_equal(build_heightmap(mixed, BIN, HEAP).heights, clean.heights)
 
 
 def test_the_grasped_surface_is_left_out():
@@ -132,7 +180,7 @@ def _memory(**kw):
     ev = SimpleNamespace(retry_policy="skip_failed", retry_same_point_m=0.03,
                          retry_neighbour_m=0.15, retry_depth_change_m=0.005,
                          retry_changed_area_m2=0.0005, retry_point_outcomes=["no_seal"],
-                         retry_drop_single_cup=True)
+                         retry_drop_single_cup=True, retry_no_seal_two_cups=True)
     return RetryMemory(SimpleNamespace(**{**vars(ev), **kw}))
 
 
@@ -203,6 +251,27 @@ def test_a_box_one_cup_dropped_keeps_its_single_cups_skipped():
         assert mem.repeats(changed, P + [0.01, 0, 0], "L") == after
         assert mem.repeats(changed, P, "R") == after
         assert not mem.repeats(changed, P + [0.05, 0, 0], "L")
+
+
+def test_two_cups_without_a_seal_keep_b_skipped():
+    """B found no seal at P: on the same image every pattern near P is a repeat (no_seal is a
+    point outcome); once a neighbour 10 cm away has moved in (36 cm² changed), B at P stays
+    skipped (the surface has not grown), L and R are new plans, a B 5 cm away is new; with the
+    rule off, B is a new plan then too."""
+    box = ((0.0, 0.0, 0.026), (0.145, 0.092, 0.052))
+    then = observe([box])
+    changed = observe([box, ((0.0, 0.1, 0.03), (0.06, 0.06, 0.06))])
+    P = np.array([0.0, 0.0, 0.052])
+    for rule in (True, False):
+        mem = _memory(retry_no_seal_two_cups=rule)
+        mem.remember(then, P, "B", "no_seal")
+        assert all(mem.repeats(then, P, k) for k in "BLR")
+        assert mem.repeats(changed, P + [0.01, 0, 0], "B") == rule
+        assert not mem.repeats(changed, P, "L") and not mem.repeats(changed, P, "R")
+        assert not mem.repeats(changed, P + [0.05, 0, 0], "B")
+    mem = _memory()
+    mem.remember(then, P, "L", "no_seal")  # one cup without a seal: the plain rule
+    assert not mem.repeats(changed, P, "L")
 
 
 # ------------------------------------------------------------------------------ decisions

@@ -315,6 +315,7 @@ class LabelConfig:
     generate_version: str = MISSING
     robot_checks: bool = MISSING  # robot-level labels (IK, joint limits, collisions)
     single_cup_fallback: bool = MISSING  # a B the robot cannot take is labelled L or R if one can
+    hold_mass: str = MISSING  # own | heaviest: the mass the hold check weighs a carton at
     workers: int = MISSING  # 0 = all cores; does not change the artifact
     force: bool = MISSING
 
@@ -525,6 +526,8 @@ class HeapModelSchema:
 
     cell_m: float = MISSING  # grid cell side (and the robot's surface points' spacing)
     bin_tolerance_m: float = MISSING  # points this near the bin's floor or inner walls are the bin
+    flying_tolerance_m: float = MISSING  # neighbours within this depth agree (0: no flying-pixel step)
+    flying_min_neighbours: int = MISSING  # a pixel needs this many agreeing neighbours of its 8
 
 
 @dataclass
@@ -553,6 +556,7 @@ class EvaluateConfig:
     # after these outcomes every pattern at the failed point is skipped, not only the failed one
     retry_point_outcomes: List[str] = MISSING
     retry_drop_single_cup: bool = MISSING  # after a single cup dropped a box: no single cup there
+    retry_no_seal_two_cups: bool = MISSING  # after B found no seal: no B there for the trial
     face_split_m: float = MISSING  # split the home region at other planner points this far away
     check_hand_fit: bool = MISSING  # the run-time check tests the pattern's cups on the surface
     single_cup_fallback: bool = MISSING  # a rejected B is tried with L, then R
@@ -588,7 +592,7 @@ class RobustnessConfig:
 
     sensor: str = MISSING
     noisy_network: bool = MISSING  # also train a network on the sensor's depth (a second one)
-    train_version: str = MISSING  # the clean-trained network ("latest" or a version)
+    train_version: str = MISSING  # the network under test network ("latest" or a version)
     baseline_version: str = MISSING  # the baseline artifact that compared it
     table1_inputs: List[str] = MISSING
     table2_inputs: List[str] = MISSING

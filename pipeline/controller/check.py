@@ -115,7 +115,9 @@ class ObservedHeap:
 def heap_model_config(cfg) -> HeapModelConfig:
     """The heap model's settings, ``cfg.evaluate.heap_model``."""
     h = cfg.evaluate.heap_model
-    return HeapModelConfig(cell_m=float(h.cell_m), bin_tolerance_m=float(h.bin_tolerance_m))
+    return HeapModelConfig(cell_m=float(h.cell_m), bin_tolerance_m=float(h.bin_tolerance_m),
+                           flying_tolerance_m=float(h.flying_tolerance_m),
+                           flying_min_neighbours=int(h.flying_min_neighbours))
 
 
 def paper_x_axis(feats) -> np.ndarray:

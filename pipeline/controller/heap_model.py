@@ -4,6 +4,13 @@ The run-time check (``pipeline.controller.check``) must keep the arm and hand cl
 cannot see whole. A camera above the bin sees the heap's upper surface only; what lies under it
 is unknown, so everything under an observed point is taken as occupied, down to the bin floor:
 
+0. A pixel whose depth agrees, within ``flying_tolerance_m``, with fewer than
+   ``flying_min_neighbours`` of its 8 neighbours is dropped as a flying pixel: the mixed depth a
+   real camera returns where a pixel straddles an edge (a box's top and the floor behind it),
+   which floats in mid-air between them and would stand as a column beside the box. Surfaces
+   and straight edges keep their pixels (an edge pixel has 5 neighbours on its own face), an
+   isolated value does not. A dropped pixel is no depth (step 3 covers its cell if nothing else
+   does). Ideal depth has no mixed pixels; ``flying_tolerance_m`` 0 turns the step off.
 1. Every pixel with depth is back-projected (``Observation.T_world_cam``) into the world frame.
    Points the static cell model explains are dropped: within ``bin_tolerance_m`` of the bin
    floor (z = 0) or of an inner wall, or outside the bin's inner walls (the rim, the walls'
@@ -53,6 +60,8 @@ class HeapModelConfig:
 
     cell_m: float  # grid cell side; the robot's surface points are this far apart at most
     bin_tolerance_m: float  # points this near the bin's floor or inner walls are the bin
+    flying_tolerance_m: float  # step 0: neighbours within this depth agree (0: step off)
+    flying_min_neighbours: int  # step 0: a pixel needs this many agreeing neighbours of 8
 
 
 @dataclass
@@ -95,6 +104,30 @@ class HeightMap:
         return np.stack(np.meshgrid(x, y), axis=-1)
 
 
+def agreeing_neighbours(depth: np.ndarray, tolerance: float) -> np.ndarray:
+    """(H, W) int: how many of each pixel's 8 neighbours hold depth within ``tolerance`` (m)
+    of its own (the image border replicated outwards; a pixel without depth has none)."""
+    d = np.where(np.isfinite(depth) & (depth > 0), depth, 0.0)
+    h, w = d.shape
+    pad = np.pad(d, 1, mode="edge")
+    count = np.zeros((h, w), np.int32)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            if dy or dx:
+                nb = pad[1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
+                count += (nb > 0) & (np.abs(nb - d) <= tolerance)
+    return np.where(d > 0, count, 0)
+
+
+def drop_flying_pixels(depth: np.ndarray, cfg: HeapModelConfig) -> np.ndarray:
+    """``depth`` (H, W, m) with its flying pixels set to 0 (no depth): module docstring, step 0."""
+    if float(cfg.flying_tolerance_m) <= 0:
+        return depth
+    keep = agreeing_neighbours(depth, float(cfg.flying_tolerance_m)) \
+        >= int(cfg.flying_min_neighbours)
+    return np.where(keep, depth, 0.0)
+
+
 def world_points(obs: Observation) -> tuple[np.ndarray, np.ndarray]:
     """(the (H, W, 3) world point of every pixel, the (H, W) bool of pixels with depth)."""
     depth = np.asarray(obs.depth_m, np.float64)
@@ -108,13 +141,14 @@ def world_points(obs: Observation) -> tuple[np.ndarray, np.ndarray]:
 
 
 def build_heightmap(obs: Observation, bin_cfg, cfg: HeapModelConfig) -> HeightMap:
-    """The height map of the heap in ``obs`` (module docstring, steps 1–3). ``bin_cfg``: the
+    """The height map of the heap in ``obs`` (module docstring, steps 0–3). ``bin_cfg``: the
     static bin (``conf/bin/``: ``inner_length_x``, ``inner_width_y``)."""
     hx, hy = float(bin_cfg.inner_length_x) / 2, float(bin_cfg.inner_width_y) / 2
     cell, tol = float(cfg.cell_m), float(cfg.bin_tolerance_m)
     nx, ny = int(np.ceil(2 * hx / cell - 1e-9)), int(np.ceil(2 * hy / cell - 1e-9))
     origin = np.array([-hx, -hy])
     world, valid = world_points(obs)
+    valid &= drop_flying_pixels(np.asarray(obs.depth_m, np.float64), cfg) > 0
     x, y, z = world[..., 0], world[..., 1], world[..., 2]
     inside = valid & (np.abs(x) < hx) & (np.abs(y) < hy)
     on_bin = (np.abs(x) > hx - tol) | (np.abs(y) > hy - tol)  # the inner walls' band

@@ -26,6 +26,13 @@ skipped for the rest of the trial even when the heap has changed: a drop moves t
 heap always looks changed, but the box has not become lighter. Two cups (B) there remain a new
 plan.
 
+**Two cups that found no seal** (``evaluate.retry_no_seal_two_cups``): after B found no seal,
+B plans within ``retry_same_point_m`` of that point stay skipped for the rest of the trial even
+when the heap has changed: the surface is no wider for a box moved beside it (two cups that
+overhang a face too narrow for them, or straddle a seam). One cup (L or R) there is a new plan
+as soon as the heap has changed, and on the same image the point's other patterns are skipped
+as ``retry_point_outcomes`` says.
+
 ``retry_policy: repeat``: no memory (identical plans are retried until the trial's failure
 limit ends it).
 """
@@ -77,6 +84,7 @@ class RetryMemory:
         self.area_m2 = float(ev.retry_changed_area_m2)
         self.point_outcomes = {str(o) for o in ev.retry_point_outcomes}
         self.drop_single_cup = bool(ev.retry_drop_single_cup)
+        self.no_seal_two_cups = bool(ev.retry_no_seal_two_cups)
         self.failed: list[FailedPlan] = []
         self._now: tuple[int, np.ndarray] | None = None  # (id of the obs, its smoothed depth)
 
@@ -124,6 +132,9 @@ class RetryMemory:
             if self.drop_single_cup and f.outcome == "dropped" and f.pattern != "B" \
                     and pattern != "B":
                 return True  # one cup did not hold this box: the heap's changes do not matter
+            if self.no_seal_two_cups and f.outcome == "no_seal" and f.pattern == "B" \
+                    and pattern == "B":
+                return True  # two cups found no seal on this surface: it has not grown
             same_plan = f.pattern == pattern or f.outcome in self.point_outcomes
             if same_plan and self.changed_area(f, obs) < self.area_m2:
                 return True

@@ -71,6 +71,13 @@ def check_cartons(cfg) -> None:
         raise ValueError("boxes.cartons.held_out_margin must be >= 0")
 
 
+def heaviest_mass(cfg, size) -> float:
+    """kg: the heaviest carton of edges ``size`` (3,) m that the distribution ``cfg``
+    (``boxes.cartons``) draws: the highest density, capped at ``max_mass`` (module docstring,
+    step 3)."""
+    return min(float(cfg.density[1]) * float(np.prod(size)), float(cfg.max_mass))
+
+
 def draw_carton(cfg, rng: np.random.Generator) -> Carton:
     """One carton of the distribution ``cfg`` (``boxes.cartons``; module docstring).
 
