@@ -4,7 +4,6 @@ planner interface, by hand, on depth images drawn without a simulated world."""
 from __future__ import annotations
 
 import dataclasses
-
 import subprocess
 import sys
 from pathlib import Path

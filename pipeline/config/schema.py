@@ -592,7 +592,7 @@ class RobustnessConfig:
 
     sensor: str = MISSING
     noisy_network: bool = MISSING  # also train a network on the sensor's depth (a second one)
-    train_version: str = MISSING  # the network under test network ("latest" or a version)
+    train_version: str = MISSING  # the network under test ("latest" or a version)
     baseline_version: str = MISSING  # the baseline artifact that compared it
     table1_inputs: List[str] = MISSING
     table2_inputs: List[str] = MISSING

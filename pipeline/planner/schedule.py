@@ -7,7 +7,8 @@
 ``max_lr`` over the first ``warmup_fraction`` of the steps along a half cosine, then falls along
 a half cosine to ``max_lr / div_factor / final_div_factor`` at the last step. A high rate early
 and an annealed one late reach the constant rate's validation loss in fewer epochs, which is
-what the reproduce-time budget needs (docs/training.md, "Learning-rate schedule", gives the measured comparison).
+what the reproduce-time budget needs (docs/training.md, "Learning-rate schedule", gives the
+measured comparison).
 
 The rate is a pure function of the step index and the run's step count, set into the
 optimiser before every step: a resumed run needs no scheduler state to continue on the same
