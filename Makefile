@@ -9,7 +9,7 @@ STAGE ?= generate
 NPROC ?= 1
 RUN := $(PY) -m
 # NPROC > 1: data-parallel training, one process per CPU share or GPU (torchrun + DDP).
-TRAIN := $(if $(filter-out 1,$(NPROC)),.venv/bin/torchrun --standalone --nproc_per_node=$(NPROC) -m,$(RUN)) pipeline.train
+TRAIN := $(if $(filter-out 1,$(NPROC)),.venv/bin/torchrun --standalone --nproc_per_node=$(NPROC) -m,$(RUN)) pipeline.stages.train
 
 .PHONY: help setup lint test test-slow reproduce generate label train baseline evaluate unseen ablation robustness report verify view bench repro-check lock clean
 
@@ -20,7 +20,9 @@ help: ## List the targets
 setup: ## Create .venv with the pinned packages and check system libraries (quick if done)
 	@bash scripts/setup.sh
 
-lint: setup ## Check the architecture contracts (import-linter: the robot side never imports the world)
+lint: setup ## Lint and format check (ruff) and the architecture contracts (import-linter: layers, the robot's fence)
+	.venv/bin/ruff check .
+	.venv/bin/ruff format --check .
 	.venv/bin/lint-imports --no-cache
 
 test: setup ## Run the fast test suite (what CI runs; the contracts are one of its tests)
@@ -30,54 +32,54 @@ test-slow: setup ## Run only the tests marked slow (`make test` runs all the oth
 	$(PY) -m pytest -q -m slow || [ $$? -eq 5 ]  # 5: no test is marked slow
 
 reproduce: setup ## Run every stage with EXPERIMENT (default: default), then the report
-	$(RUN) pipeline.generate experiment=$(EXPERIMENT) $(ARGS)
-	$(RUN) pipeline.label experiment=$(EXPERIMENT) $(ARGS)
+	$(RUN) pipeline.stages.generate experiment=$(EXPERIMENT) $(ARGS)
+	$(RUN) pipeline.stages.label experiment=$(EXPERIMENT) $(ARGS)
 	$(TRAIN) experiment=$(EXPERIMENT) $(ARGS)
-	$(RUN) pipeline.baseline experiment=$(EXPERIMENT) $(ARGS)
-	$(RUN) pipeline.evaluate experiment=$(EXPERIMENT) $(ARGS)
-	$(RUN) pipeline.unseen experiment=$(EXPERIMENT) $(ARGS)
-	$(RUN) pipeline.ablation experiment=$(EXPERIMENT) $(ARGS)
-	$(RUN) pipeline.robustness experiment=$(EXPERIMENT) $(ARGS)
+	$(RUN) pipeline.stages.baseline experiment=$(EXPERIMENT) $(ARGS)
+	$(RUN) pipeline.stages.evaluate experiment=$(EXPERIMENT) $(ARGS)
+	$(RUN) pipeline.stages.unseen experiment=$(EXPERIMENT) $(ARGS)
+	$(RUN) pipeline.stages.ablation experiment=$(EXPERIMENT) $(ARGS)
+	$(RUN) pipeline.stages.robustness experiment=$(EXPERIMENT) $(ARGS)
 	$(RUN) pipeline.report experiment=$(EXPERIMENT) $(ARGS)
 
 generate: setup ## Generation stage: depth images of box heaps (paper Sec. 4.3)
-	$(RUN) pipeline.generate experiment=$(EXPERIMENT) $(ARGS)
+	$(RUN) pipeline.stages.generate experiment=$(EXPERIMENT) $(ARGS)
 
 label: setup ## Labelling stage: surfaces, hand- and robot-level grasp classes (Sec. 4.3)
-	$(RUN) pipeline.label experiment=$(EXPERIMENT) $(ARGS)
+	$(RUN) pipeline.stages.label experiment=$(EXPERIMENT) $(ARGS)
 
 train: setup ## Training stage: the DCNN grasp planner on the labels (Secs. 4.1, 4.2); NPROC=2: torchrun
 	$(TRAIN) experiment=$(EXPERIMENT) $(ARGS)
 
 baseline: setup ## Dex-Net-style comparison: GQ-CNN + CEM suction planner and Table 2 (Sec. 8.1.1)
-	$(RUN) pipeline.baseline experiment=$(EXPERIMENT) $(ARGS)
+	$(RUN) pipeline.stages.baseline experiment=$(EXPERIMENT) $(ARGS)
 
 evaluate: setup ## Closed-loop picking trials: descriptor, 2.5D VS, suction; Table 3 (Secs. 5, 6)
-	$(RUN) pipeline.evaluate experiment=$(EXPERIMENT) $(ARGS)
+	$(RUN) pipeline.stages.evaluate experiment=$(EXPERIMENT) $(ARGS)
 
 unseen: setup ## Unseen box sizes: Tables 1 and 2 on heaps of boxes not seen in training
-	$(RUN) pipeline.unseen experiment=$(EXPERIMENT) $(ARGS)
+	$(RUN) pipeline.stages.unseen experiment=$(EXPERIMENT) $(ARGS)
 
 ablation: setup ## Execution ablation: each closed-loop extension on and off on the same heaps
-	$(RUN) pipeline.ablation experiment=$(EXPERIMENT) $(ARGS)
+	$(RUN) pipeline.stages.ablation experiment=$(EXPERIMENT) $(ARGS)
 
 robustness: setup ## Robustness study: SR300 sensor noise, depth filters, Sec. 8.4 policies (Secs. 8.4, 8.5)
-	$(RUN) pipeline.robustness experiment=$(EXPERIMENT) $(ARGS)
+	$(RUN) pipeline.stages.robustness experiment=$(EXPERIMENT) $(ARGS)
 
 report: setup ## Report stage: tables and figures into reports/
 	$(RUN) pipeline.report experiment=$(EXPERIMENT) $(ARGS)
 
 verify: setup ## Re-hash every artifact against its manifest
-	$(RUN) pipeline.verify $(ARGS)
+	$(RUN) pipeline.tools.verify $(ARGS)
 
 view: setup ## Open the latest log of STAGE (default: generate) in the Rerun viewer
-	@$(RUN) pipeline.view $(STAGE) $(ARGS)
+	@$(RUN) pipeline.tools.view $(STAGE) $(ARGS)
 
 bench: setup ## Print measured throughput figures (generation scenes/s, render time)
-	$(RUN) pipeline.bench $(ARGS)
+	$(RUN) pipeline.tools.bench $(ARGS)
 
 repro-check: setup ## Run the smoke pipeline twice into fresh roots and compare every artifact
-	$(RUN) pipeline.repro_check $(ARGS)
+	$(RUN) pipeline.tools.repro_check $(ARGS)
 
 lock: ## Regenerate requirements.lock from the current .venv
 	$(PY) -m pip freeze --exclude-editable | sed 's/^torch==\(.*\)+cpu/torch==\1/' | \

@@ -12,16 +12,22 @@ from pathlib import Path
 import pybullet as p
 import pytest
 
-from pipeline.cli import compose
+from pipeline.runtime.cli import compose
 
 # The session's smoke pipeline: 4 training, 1 validation and 2 test heaps in shards of 2, one
 # worker per stage (a CPU training of conf/experiment/smoke.yaml's one epoch is deterministic).
-SMOKE_SCENES = ("generate.num_scenes=4", "generate.num_val_scenes=1", "generate.num_test_scenes=2",
-                "generate.scenes_per_shard=2", "generate.workers=1", "label.workers=1",
-                "train.device=cpu")
+SMOKE_SCENES = (
+    "generate.num_scenes=4",
+    "generate.num_val_scenes=1",
+    "generate.num_test_scenes=2",
+    "generate.scenes_per_shard=2",
+    "generate.workers=1",
+    "label.workers=1",
+    "train.device=cpu",
+)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def composed(*overrides: str):
     """The composed configuration (``conf/``, the smoke experiment) with ``overrides``, composed
     once per test session and set of overrides (read-only: do not change it)."""
@@ -41,23 +47,25 @@ def _config_builders() -> dict:
     """Each algorithm settings class → (the pipeline's builder of it from a composed config, the
     fields a caller gives it). One table, so tests build their settings as the stages do."""
     from pipeline.dexnet.cem import CEMConfig
-    from pipeline.dexnet.contact import SuctionModelConfig, suction_model_config
     from pipeline.dexnet.gqcnn import CropConfig, GQCNNConfig
     from pipeline.dexnet.planner import (
-        cem_config, crop_config, gqcnn_config, planarity_config, sampler_config,
+        cem_config,
+        crop_config,
+        gqcnn_config,
+        planarity_config,
+        sampler_config,
     )
     from pipeline.dexnet.quality import PlanarityConfig
     from pipeline.dexnet.sampling import SamplerConfig
-    from pipeline.robot.model import robot_config
-    from pipeline.robot.path import path_config
+    from pipeline.grasping.suction import SuctionModelConfig, suction_model_config
+    from pipeline.grasping.surfaces import SurfaceDetectionConfig
     from pipeline.labelling.scene import surface_config
-    from pipeline.labelling.surfaces import SurfaceDetectionConfig
     from pipeline.planner.loss import LossConfig, loss_config
     from pipeline.planner.network import NetworkConfig, network_config
     from pipeline.planner.planner import ranking_config
     from pipeline.planner.ranking import RankingConfig
-    from pipeline.robot.model import RobotConfig
-    from pipeline.robot.path import PathCheckConfig
+    from pipeline.robot.model import RobotConfig, robot_config
+    from pipeline.robot.path import PathCheckConfig, path_config
     from pipeline.servo.control import ServoConfig, servo_config
     from pipeline.servo.descriptor import DescriptorConfig, descriptor_config
 
@@ -88,24 +96,34 @@ def default_config(cls, **overrides):
     (``RankingConfig``'s ``threshold``) must be in ``overrides``."""
     builders = _config_builders()
     if cls not in builders:
-        raise TypeError(f"default_config knows no builder for {cls!r}: add it to "
-                        "tests/conftest.py's _config_builders")
+        raise TypeError(
+            f"default_config knows no builder for {cls!r}: add it to "
+            "tests/conftest.py's _config_builders"
+        )
     build, given = builders[cls]
     missing = [name for name in given if name not in overrides]
     if missing:
-        raise TypeError(f"default_config({cls.__name__}) needs {missing} in its overrides: "
-                        "the pipeline's builder takes them from its caller")
+        raise TypeError(
+            f"default_config({cls.__name__}) needs {missing} in its overrides: "
+            "the pipeline's builder takes them from its caller"
+        )
     obj = build(composed(), **{name: overrides.pop(name) for name in given})
     if obj is None:
-        raise ValueError(f"the composed config builds no {cls.__name__} (e.g. robot.path_check "
-                         "is false)")
+        raise ValueError(
+            f"the composed config builds no {cls.__name__} (e.g. robot.path_check is false)"
+        )
     return dataclasses.replace(obj, **overrides)
 
 
 def smoke_overrides(root: Path, *extra: str) -> list[str]:
     """Overrides of a smoke config rooted in ``root`` with the session pipeline's scene counts."""
-    return ["experiment=smoke", f"paths.root={root}", "logging.progress=false", *SMOKE_SCENES,
-            *extra]
+    return [
+        "experiment=smoke",
+        f"paths.root={root}",
+        "logging.progress=false",
+        *SMOKE_SCENES,
+        *extra,
+    ]
 
 
 @dataclass(frozen=True)
@@ -122,7 +140,7 @@ class SmokeRoot:
         overrides it was built with and ``extra``."""
         return compose(stage, smoke_overrides(self.root, *self.extra, *extra))
 
-    def copy(self, dest: Path, tops: tuple[str, ...] = ("data", "models")) -> "SmokeRoot":
+    def copy(self, dest: Path, tops: tuple[str, ...] = ("data", "models")) -> SmokeRoot:
         """A scratch copy of the top folders ``tops`` in ``dest`` (replaced if it exists)."""
         if dest.exists():
             shutil.rmtree(dest)
@@ -141,13 +159,14 @@ class SmokeRoot:
 PIPELINE_STAGES = ("generate", "label", "train")
 
 
-def build_smoke_root(root: Path, *extra: str, stages: tuple[str, ...] = PIPELINE_STAGES
-                     ) -> SmokeRoot:
+def build_smoke_root(
+    root: Path, *extra: str, stages: tuple[str, ...] = PIPELINE_STAGES
+) -> SmokeRoot:
     """Run ``stages`` (in order, each reading the previous one's ``latest``) in ``root`` with
     the session's smoke overrides plus ``extra``."""
-    from pipeline.generate import generate
-    from pipeline.label import label
-    from pipeline.train import train
+    from pipeline.stages.generate import generate
+    from pipeline.stages.label import label
+    from pipeline.stages.train import train
 
     run = {"generate": generate, "label": label, "train": train}
     smoke = SmokeRoot(root, tuple(extra))
@@ -166,8 +185,9 @@ def smoke_pipelines(tmp_path_factory):
     def get(*extra: str, stages: tuple[str, ...] = PIPELINE_STAGES) -> SmokeRoot:
         key = (extra, tuple(stages))
         if key not in built:
-            built[key] = build_smoke_root(tmp_path_factory.mktemp("smoke_pipeline"), *extra,
-                                          stages=stages)
+            built[key] = build_smoke_root(
+                tmp_path_factory.mktemp("smoke_pipeline"), *extra, stages=stages
+            )
         return built[key]
 
     return get
@@ -196,8 +216,9 @@ def static_box():
     def make(client, half, position, quat=(0, 0, 0, 1)):
         col = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client)
         vis = p.createVisualShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client)
-        return p.createMultiBody(0, col, vis, basePosition=position, baseOrientation=quat,
-                                 physicsClientId=client)
+        return p.createMultiBody(
+            0, col, vis, basePosition=position, baseOrientation=quat, physicsClientId=client
+        )
 
     return make
 
@@ -207,9 +228,9 @@ def smoke_cfg(tmp_path: Path):
     """A factory: ``smoke_cfg("generate", "generate.num_scenes=2")`` → config rooted in tmp_path."""
 
     def make(config_name: str = "generate", *overrides: str):
-        return compose(config_name, [
-            "experiment=smoke", f"paths.root={tmp_path}", "logging.progress=false",
-            *overrides,
-        ])
+        return compose(
+            config_name,
+            ["experiment=smoke", f"paths.root={tmp_path}", "logging.progress=false", *overrides],
+        )
 
     return make

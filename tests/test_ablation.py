@@ -1,4 +1,4 @@
-"""The execution ablation (pipeline/ablation.py): one evaluation per variant, gathered; the
+"""The execution ablation (pipeline/stages/ablation.py): one evaluation per variant, gathered; the
 evaluation's ``latest`` left where it was; bad input refused before any work."""
 
 from __future__ import annotations
@@ -6,13 +6,13 @@ from __future__ import annotations
 import json
 
 import pytest
-
 from conftest import smoke_overrides
-from pipeline.cli import compose
+
+from pipeline.runtime.cli import compose
 
 
 def test_bad_planner_and_repeated_names_are_refused_before_any_work(smoke_cfg, tmp_path):
-    from pipeline.ablation import ablation
+    from pipeline.stages.ablation import ablation
 
     with pytest.raises(ValueError, match="ablation.planners"):
         ablation(smoke_cfg("ablation", "ablation.planners=[robot]"))
@@ -30,8 +30,8 @@ def test_smoke_ablation_end_to_end(tmp_path):
     """Two variants of the oracle at smoke scale: one evaluation artifact each, rows in config
     order with their overrides, the evaluation's ``latest`` unchanged, and a rerun reuses it
     all; the report shows the section."""
-    from pipeline.ablation import ablation
-    from pipeline.evaluate import evaluate
+    from pipeline.stages.ablation import ablation
+    from pipeline.stages.evaluate import evaluate
 
     base = smoke_overrides(tmp_path)  # the oracle needs no upstream artifact
     dev = evaluate(compose("evaluate", base + ["planner=oracle", "evaluate.split=dev"]))
@@ -40,14 +40,19 @@ def test_smoke_ablation_end_to_end(tmp_path):
     by_name = {str(v.name): v for v in cfg.ablation.variants}
     # no_fallback_tier runs for the DCNN alone (the oracle has no second tier): no row here
     assert list(cfg.ablation.variant_planners.no_fallback_tier) == ["dcnn"]
-    cfg.ablation.variants = [by_name["all_on"], by_name["no_fallback_tier"],
-                             by_name["no_path_check"]]
+    cfg.ablation.variants = [
+        by_name["all_on"],
+        by_name["no_fallback_tier"],
+        by_name["no_path_check"],
+    ]
     out = ablation(cfg, base)
     latest = tmp_path / "data" / "evaluate" / "latest"
     assert latest.resolve() == first.resolve()
     rows = json.loads((out / "ablation.json").read_text())
     assert [(r["planner"], r["variant"], r["overrides"]) for r in rows] == [
-        ("oracle", "all_on", "-"), ("oracle", "no_path_check", "robot.path_check=false")]
+        ("oracle", "all_on", "-"),
+        ("oracle", "no_path_check", "robot.path_check=false"),
+    ]
     # all_on is the default evaluation on the dev heaps (the ablation never runs on test): the
     # same artifact, reused; the test evaluation is another
     assert rows[0]["evaluate_version"] == dev.name != first.name

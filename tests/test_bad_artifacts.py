@@ -15,17 +15,21 @@ from pathlib import Path
 
 import pytest
 import torch
+from conftest import default_config, smoke_overrides
 
 from pipeline.artifacts import (
-    ArtifactError, artifact_file, load_manifest, resolve_artifact, verify_artifact,
+    ArtifactError,
+    artifact_file,
+    load_manifest,
+    resolve_artifact,
+    verify_artifact,
 )
-from pipeline.artifacts.fingerprint import sha256_file
-from conftest import default_config, smoke_overrides
-from pipeline.cli import MissingLibraryError, compose, import_with_fix, stage_main
-from pipeline.dataset.scenes import SceneDataset
+from pipeline.artifacts.fingerprint import sha256_file, stage_module
 from pipeline.dataset.labels import LabelSet
-from pipeline.label import label
-from pipeline.train import train
+from pipeline.dataset.scenes import SceneDataset
+from pipeline.runtime.cli import MissingLibraryError, compose, import_with_fix, stage_main
+from pipeline.stages.label import label
+from pipeline.stages.train import train
 
 REPO = Path(__file__).resolve().parents[1]
 STAGES = ("label", "train", "baseline", "evaluate", "report")
@@ -42,7 +46,7 @@ def _cfg(stage: str, root: Path, *extra: str):
 def _stage_fn(stage: str):
     import importlib
 
-    return getattr(importlib.import_module(f"pipeline.{stage}"), stage)
+    return getattr(importlib.import_module(stage_module(stage)), stage)
 
 
 @pytest.fixture(scope="module")
@@ -80,11 +84,15 @@ def run_cli(stage: str, root: Path, *extra: str, prelude: str = "") -> subproces
     """``python -m pipeline.<stage> <overrides>``; ``prelude``: Python run first, in-process."""
     args = _overrides(root, *extra)
     if prelude:
-        cmd = [sys.executable, "-c",
-               f"import runpy, sys; {prelude}; sys.argv[0] = 'pipeline.{stage}'; "
-               f"runpy.run_module('pipeline.{stage}', run_name='__main__', alter_sys=True)", *args]
+        cmd = [
+            sys.executable,
+            "-c",
+            f"import runpy, sys; {prelude}; sys.argv[0] = '{stage_module(stage)}'; "
+            f"runpy.run_module('{stage_module(stage)}', run_name='__main__', alter_sys=True)",
+            *args,
+        ]
     else:
-        cmd = [sys.executable, "-m", f"pipeline.{stage}", *args]
+        cmd = [sys.executable, "-m", stage_module(stage), *args]
     return subprocess.run(cmd, capture_output=True, text=True, cwd=REPO, timeout=300)
 
 
@@ -124,11 +132,18 @@ def _rehash(folder: Path, rel: str) -> None:
 VERSION_KEYS = [
     "label.generate_version",
     "train.label_version",
-    "baseline.generate_version", "baseline.train_version",
-    "evaluate.train_version", "evaluate.baseline_version",
-    "report.generate_version", "report.label_version", "report.train_version",
-    "report.baseline_version", "report.evaluate_version", "report.robustness_version",
-    "report.ablation_version", "report.unseen_version",
+    "baseline.generate_version",
+    "baseline.train_version",
+    "evaluate.train_version",
+    "evaluate.baseline_version",
+    "report.generate_version",
+    "report.label_version",
+    "report.train_version",
+    "report.baseline_version",
+    "report.evaluate_version",
+    "report.robustness_version",
+    "report.ablation_version",
+    "report.unseen_version",
 ]
 
 
@@ -150,12 +165,17 @@ def test_unknown_version_is_a_clear_error(built: Path, key: str, capsys) -> None
         stage_main(_stage_fn(stage))(cfg)
     assert info.value.code == 2
     err = capsys.readouterr().err.strip()
-    assert err.startswith(f"error: [{stage}] {key}=deadbeef00000000: no complete '{upstream}' "
-                          "artifact named 'deadbeef00000000'"), err
+    assert err.startswith(
+        f"error: [{stage}] {key}=deadbeef00000000: no complete '{upstream}' "
+        "artifact named 'deadbeef00000000'"
+    ), err
     assert "\n" not in err and "Fix:" in err
     top = "models" if upstream == "train" else "data"
-    known = sorted(p.name for p in (built / top / upstream).glob("[!.]*") if not p.is_symlink()) \
-        if (built / top / upstream).is_dir() else []
+    known = (
+        sorted(p.name for p in (built / top / upstream).glob("[!.]*") if not p.is_symlink())
+        if (built / top / upstream).is_dir()
+        else []
+    )
     if known:
         assert f"available versions: {', '.join(known)}" in err and f"pass {key}=" in err
     else:
@@ -163,10 +183,15 @@ def test_unknown_version_is_a_clear_error(built: Path, key: str, capsys) -> None
     assert snapshot(built) == before
 
 
-@pytest.mark.parametrize("stage,key", [("label", "label.generate_version"),
-                                       ("train", "train.label_version"),
-                                       ("evaluate", "evaluate.train_version"),
-                                       ("report", "report.train_version")])
+@pytest.mark.parametrize(
+    "stage,key",
+    [
+        ("label", "label.generate_version"),
+        ("train", "train.label_version"),
+        ("evaluate", "evaluate.train_version"),
+        ("report", "report.train_version"),
+    ],
+)
 def test_unknown_version_from_the_command_line(built: Path, stage: str, key: str) -> None:
     before = snapshot(built)
     proc = run_cli(stage, built, f"{key}=nope")
@@ -186,11 +211,20 @@ def test_truncated_generation_shard(root: Path) -> None:
     shard.write_bytes(shard.read_bytes()[:1000])
     before = snapshot(root)
     proc = run_cli("label", root, "label.force=true")
-    assert_clean_failure(proc, "[label]", str(gen), "scenes/train-00000.npz: changed",
-                         "generate.force=true", "make verify")
+    assert_clean_failure(
+        proc,
+        "[label]",
+        str(gen),
+        "scenes/train-00000.npz: changed",
+        "generate.force=true",
+        "make verify",
+    )
     # every other stage that reads it says the same
-    for stage, extra in (("train", "train.force=true"), ("baseline", "baseline.train_version=none"),
-                         ("report", "report.force=true")):
+    for stage, extra in (
+        ("train", "train.force=true"),
+        ("baseline", "baseline.train_version=none"),
+        ("report", "report.force=true"),
+    ):
         with pytest.raises(ArtifactError, match="train-00000.npz: changed") as info:
             _stage_fn(stage)(_cfg(stage, root, extra))
         assert "generate.force=true" in str(info.value)
@@ -205,8 +239,14 @@ def test_altered_labels_file(root: Path) -> None:
     shard.write_bytes(bytes(data))
     before = snapshot(root)
     proc = run_cli("train", root, "train.force=true")
-    assert_clean_failure(proc, "[train]", str(lab), f"labels/{shard.name}: changed",
-                         "label.force=true", "make verify")
+    assert_clean_failure(
+        proc,
+        "[train]",
+        str(lab),
+        f"labels/{shard.name}: changed",
+        "label.force=true",
+        "make verify",
+    )
     with pytest.raises(ArtifactError, match=f"labels/{shard.name}: changed"):
         _stage_fn("report")(_cfg("report", root))
     assert snapshot(root) == before
@@ -229,8 +269,16 @@ def test_artifact_file_refuses_names_outside(tmp_path: Path) -> None:
     os.symlink(tmp_path / "secret.txt", folder / "sub" / "link.npz")
     os.symlink("../..", folder / "up")
     assert artifact_file(folder, "sub/a.npz") == folder / "sub" / "a.npz"
-    for bad in ("/etc/passwd", "../secret.txt", "sub/../../secret.txt", "sub/link.npz",
-                "up/secret.txt", "", "C:/x", "sub\\..\\..\\secret.txt"):
+    for bad in (
+        "/etc/passwd",
+        "../secret.txt",
+        "sub/../../secret.txt",
+        "sub/link.npz",
+        "up/secret.txt",
+        "",
+        "C:/x",
+        "sub\\..\\..\\secret.txt",
+    ):
         with pytest.raises(ArtifactError, match="outside|absolute|not a relative|'\\.\\.'"):
             artifact_file(folder, bad)
 
@@ -289,8 +337,9 @@ def test_malicious_checkpoint_is_refused(root: Path, tmp_path: Path) -> None:
     torch.save({"model": _Exploit(marker), "optimizer": {}, "epoch": 1, "history": {}}, ckpt)
     before = snapshot(root)
     proc = run_cli("train", root, "train.force=true")
-    assert_clean_failure(proc, f"cannot resume from {ckpt}", "weights_only=True",
-                         f"delete the folder {ckpt.parent}")
+    assert_clean_failure(
+        proc, f"cannot resume from {ckpt}", "weights_only=True", f"delete the folder {ckpt.parent}"
+    )
     assert not marker.exists()
     assert snapshot(root) == before
 
@@ -303,12 +352,16 @@ def _other_network_checkpoint(path: Path) -> None:
     torch.save(ckpt, path)
 
 
-@pytest.mark.parametrize("damage,expected", [
-    (lambda p: p.write_bytes(p.read_bytes()[: p.stat().st_size // 2]), "not a readable torch"),
-    (lambda p: p.write_text("not a checkpoint\n"), "not a readable torch"),
-    (lambda p: torch.save([1, 2, 3], p), "not a training checkpoint"),
-    (_other_network_checkpoint, "of another network"),
-], ids=["truncated", "text", "list", "other-network"])
+@pytest.mark.parametrize(
+    "damage,expected",
+    [
+        (lambda p: p.write_bytes(p.read_bytes()[: p.stat().st_size // 2]), "not a readable torch"),
+        (lambda p: p.write_text("not a checkpoint\n"), "not a readable torch"),
+        (lambda p: torch.save([1, 2, 3], p), "not a training checkpoint"),
+        (_other_network_checkpoint, "of another network"),
+    ],
+    ids=["truncated", "text", "list", "other-network"],
+)
 def test_unusable_checkpoint_is_refused(root: Path, damage, expected: str, capsys) -> None:
     ckpt = _resume_checkpoint(root)
     damage(ckpt)
@@ -339,8 +392,14 @@ def test_missing_open3d_says_how_to_install(monkeypatch) -> None:
 
 def test_missing_open3d_from_the_command_line(root: Path) -> None:
     before = snapshot(root)
-    proc = run_cli("label", root, "surfaces.ransac_backend=open3d",
-                   prelude="sys.modules['open3d'] = None")
-    assert_clean_failure(proc, "cannot import open3d", "libusb-1.0",
-                         "sudo apt-get install libusb-1.0-0", "scripts/setup.sh")
+    proc = run_cli(
+        "label", root, "surfaces.ransac_backend=open3d", prelude="sys.modules['open3d'] = None"
+    )
+    assert_clean_failure(
+        proc,
+        "cannot import open3d",
+        "libusb-1.0",
+        "sudo apt-get install libusb-1.0-0",
+        "scripts/setup.sh",
+    )
     assert snapshot(root) == before

@@ -20,11 +20,11 @@ import dataclasses
 import numpy as np
 import pytest
 import torch
+from conftest import default_config
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from conftest import default_config
 from pipeline.camera.depth_input import MAX_DEPTH_M, MIN_DEPTH_M, DepthImageError, check_depth_image
 from pipeline.camera.geometry import Intrinsics, camera_pose_above_bin
 from pipeline.dexnet.cem import CEMConfig
@@ -33,15 +33,18 @@ from pipeline.dexnet.planner import NO_GRASP_REASONS as DEX_REASONS
 from pipeline.dexnet.planner import DexNetPlanner, Workspace, load_gqcnn
 from pipeline.dexnet.quality import PlanarityConfig
 from pipeline.dexnet.sampling import SamplerConfig
-from pipeline.planner.normalisation import Normalisation
 from pipeline.planner.network import GraspNet, NetworkConfig
+from pipeline.planner.normalisation import Normalisation
 from pipeline.planner.planner import NO_GRASP_REASONS as DCNN_REASONS
 from pipeline.planner.planner import ModelFileError, Planner
 from pipeline.planner.ranking import RankingConfig
 from pipeline.servo.descriptor import NO_SURFACE_REASONS, DescriptorConfig, describe_surface
 
-SETTINGS = settings(max_examples=25, deadline=None,
-                    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+SETTINGS = settings(
+    max_examples=25,
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+)
 
 FLOOR = 0.625  # camera height above the bin floor (conf/camera/sr300.yaml)
 D_GROUND = 0.645  # + floor thickness
@@ -51,8 +54,20 @@ MID = Intrinsics(48, 48, 60.0, 60.0, 23.5, 23.5)  # descriptor
 # conf/servo/'s descriptor, its window-depth tolerance and normal tracking off
 DESCRIPTOR = default_config(DescriptorConfig, window_tolerance_depth=0.0, track_normal_deg=0.0)
 
-BAD_VALUES = [np.nan, np.inf, -np.inf, 0.0, -0.5, -1e30, 1e-30, 0.01, 50.0, 1e30,
-              float(np.finfo(np.float32).max), 1e300]
+BAD_VALUES = [
+    np.nan,
+    np.inf,
+    -np.inf,
+    0.0,
+    -0.5,
+    -1e30,
+    1e-30,
+    0.01,
+    50.0,
+    1e30,
+    float(np.finfo(np.float32).max),
+    1e300,
+]
 
 
 def valid_mask(image: np.ndarray) -> np.ndarray:
@@ -60,8 +75,12 @@ def valid_mask(image: np.ndarray) -> np.ndarray:
     validator (float64, so float32 overflow of 1e300 counts as invalid as it should)."""
     with np.errstate(invalid="ignore", over="ignore"):
         x = np.asarray(image, np.float64)
-        return np.isfinite(x) & (x >= MIN_DEPTH_M) & (x <= MAX_DEPTH_M) & np.isfinite(
-            np.asarray(image).astype(np.float32))
+        return (
+            np.isfinite(x)
+            & (x >= MIN_DEPTH_M)
+            & (x <= MAX_DEPTH_M)
+            & np.isfinite(np.asarray(image).astype(np.float32))
+        )
 
 
 @st.composite
@@ -87,19 +106,20 @@ def depth_scenes(draw, intr: Intrinsics):
         for _ in range(n_boxes):
             v0, u0 = rng.integers(0, H), rng.integers(0, W)
             h, w = rng.integers(2, H // 2 + 3), rng.integers(2, W // 2 + 3)
-            d[v0:v0 + h, u0:u0 + w] = rng.uniform(0.4, 0.6)
+            d[v0 : v0 + h, u0 : u0 + w] = rng.uniform(0.4, 0.6)
     m = rng.random((H, W)) < bad_frac
     d[m] = rng.choice(np.array(bad), int(m.sum()))
     for _ in range(n_holes):
         v0, u0 = rng.integers(0, H), rng.integers(0, W)
         s = int(rng.integers(1, H // 4 + 2))
-        d[v0:v0 + s, u0:u0 + s] = rng.choice(np.array(bad))
+        d[v0 : v0 + s, u0 : u0 + s] = rng.choice(np.array(bad))
     with np.errstate(over="ignore"):
         return d.astype(dtype)
 
 
 # ---------------------------------------------------------------------------------------------
 # Planners under test.
+
 
 @pytest.fixture(scope="module", autouse=True)
 def one_torch_thread():
@@ -109,6 +129,7 @@ def one_torch_thread():
     torch.set_num_threads(1)
     yield
     torch.set_num_threads(before)
+
 
 def dcnn_planner(firing: bool) -> Planner:
     """An untrained width-1/16 DCNN. ``firing``: class biases raised and output weights scaled
@@ -121,8 +142,11 @@ def dcnn_planner(firing: bool) -> Planner:
             net.out.weight.mul_(200.0)
             net.out.bias[2:5] = 4.0
             net.out.bias[5] = -4.0  # NG
-    return Planner(net, Normalisation(D_GROUND, 0.1, 0.5),
-                   default_config(RankingConfig, d_ground=D_GROUND, threshold=0.5))
+    return Planner(
+        net,
+        Normalisation(D_GROUND, 0.1, 0.5),
+        default_config(RankingConfig, d_ground=D_GROUND, threshold=0.5),
+    )
 
 
 @pytest.fixture(scope="module")
@@ -145,12 +169,16 @@ def dexnet_planners(cem: CEMConfig | None = None, half: float = 0.3) -> list[Dex
     half-extent, m (0.3: the whole image is inside the bin)."""
     ws = Workspace(half, half, 0.005, camera_pose_above_bin(FLOOR))
     sampler = default_config(SamplerConfig, border_px=2)
-    cem = cem or default_config(CEMConfig, num_seed_samples=16, num_gmm_samples=8, num_iters=1,
-                                max_resamples=3)
+    cem = cem or default_config(
+        CEMConfig, num_seed_samples=16, num_gmm_samples=8, num_iters=1, max_resamples=3
+    )
     crop = default_config(CropConfig, window_px=8, size=8, d_ground=D_GROUND)
-    return [DexNetPlanner("planarity", ws, sampler, cem, default_config(PlanarityConfig)),
-            DexNetPlanner("gqcnn", ws, sampler, cem, default_config(PlanarityConfig), crop,
-                          tiny_gqcnn())]
+    return [
+        DexNetPlanner("planarity", ws, sampler, cem, default_config(PlanarityConfig)),
+        DexNetPlanner(
+            "gqcnn", ws, sampler, cem, default_config(PlanarityConfig), crop, tiny_gqcnn()
+        ),
+    ]
 
 
 @pytest.fixture(scope="module")
@@ -193,9 +221,16 @@ def assert_descriptor_result(image: np.ndarray, result) -> None:
     ok = valid_mask(image)
     assert features.region.shape == image.shape and not (features.region & ~ok).any()
     assert features.num_pixels == int(features.region.sum())
-    for a in (features.center_px, features.center_cam, features.normal_cam, features.plane,
-              features.long_axis_cam, features.short_axis_cam, features.warped_long,
-              features.warped_short):
+    for a in (
+        features.center_px,
+        features.center_cam,
+        features.normal_cam,
+        features.plane,
+        features.long_axis_cam,
+        features.short_axis_cam,
+        features.warped_long,
+        features.warped_short,
+    ):
         assert np.isfinite(a).all()
 
 
@@ -206,12 +241,17 @@ def unchanged(before: np.ndarray, after: np.ndarray) -> bool:
 # ---------------------------------------------------------------------------------------------
 # The shared validator.
 
+
 @SETTINGS
-@given(hnp.arrays(st.sampled_from([np.float16, np.float32, np.float64]),
-                  hnp.array_shapes(min_dims=2, max_dims=2, min_side=1, max_side=12),
-                  elements=st.floats(allow_nan=True, allow_infinity=True, width=16)
-                  | st.sampled_from([np.nan, np.inf, -np.inf, 0.0, -0.5])
-                  | st.floats(0.0625, 8.0, width=16)))
+@given(
+    hnp.arrays(
+        st.sampled_from([np.float16, np.float32, np.float64]),
+        hnp.array_shapes(min_dims=2, max_dims=2, min_side=1, max_side=12),
+        elements=st.floats(allow_nan=True, allow_infinity=True, width=16)
+        | st.sampled_from([np.nan, np.inf, -np.inf, 0.0, -0.5])
+        | st.floats(0.0625, 8.0, width=16),
+    )
+)
 def test_validator_sanitises_to_float32_metres_with_zero_for_no_data(image):
     before = image.copy()
     out = check_depth_image(image)
@@ -231,10 +271,17 @@ def test_validator_rejects_integer_depth_with_the_conversion(dtype):
         check_depth_image(raw, (4, 5))
 
 
-@pytest.mark.parametrize("image", [
-    np.full((4, 5), 0.5 + 0j), np.array([[0.5, None]], dtype=object), None, "depth",
-    [[0.5, 0.5], [0.5]],
-], ids=["complex", "object", "None", "str", "ragged"])
+@pytest.mark.parametrize(
+    "image",
+    [
+        np.full((4, 5), 0.5 + 0j),
+        np.array([[0.5, None]], dtype=object),
+        None,
+        "depth",
+        [[0.5, 0.5], [0.5]],
+    ],
+    ids=["complex", "object", "None", "str", "ragged"],
+)
 def test_validator_rejects_what_is_not_real_depth(image):
     with pytest.raises(DepthImageError, match="float32"):
         check_depth_image(image)
@@ -254,6 +301,7 @@ def test_validator_treats_masked_pixels_as_no_data():
 
 # ---------------------------------------------------------------------------------------------
 # Property tests: random mixes of bad values, holes, dtypes.
+
 
 @SETTINGS
 @given(depth_scenes(SR300))
@@ -277,8 +325,7 @@ def test_dexnet_plan_never_fails_and_grasps_only_valid_pixels(dexnets, image):
 
 
 @SETTINGS
-@given(depth_scenes(MID), st.tuples(st.floats(-3, 51), st.floats(-3, 51)),
-       st.sampled_from([0, 2]))
+@given(depth_scenes(MID), st.tuples(st.floats(-3, 51), st.floats(-3, 51)), st.sampled_from([0, 2]))
 def test_descriptor_returns_features_or_a_documented_reason(image, seed, smoothing):
     before = image.copy()
     cfg = dataclasses.replace(DESCRIPTOR, normal_smoothing=smoothing)
@@ -291,6 +338,7 @@ def test_descriptor_returns_features_or_a_documented_reason(image, seed, smoothi
 # ---------------------------------------------------------------------------------------------
 # Examples.
 
+
 def floor_only(intr: Intrinsics) -> np.ndarray:
     """An empty bin: the floor at FLOOR, 1/8 of the image of wall top rims (0.45 m) around
     it and the ground outside (D_GROUND). On SMALL the rims' inner edge is 8 px from the
@@ -299,7 +347,7 @@ def floor_only(intr: Intrinsics) -> np.ndarray:
     d = np.full((H, W), D_GROUND, np.float32)
     b = max(H // 8, 1)
     d[b:-b, b:-b] = 0.45
-    d[2 * b:-2 * b, 2 * b:-2 * b] = FLOOR
+    d[2 * b : -2 * b, 2 * b : -2 * b] = FLOOR
     return d
 
 
@@ -328,8 +376,7 @@ def test_dcnn_examples(firing, quiet, name):
         if name in ("all_nan", "all_zero", "all_negative", "all_inf"):
             assert out == [] and planner.last_reason == "no_valid_depth"
         if name == "one_pixel":  # no normal from one pixel: nothing to rank
-            assert out == [] and planner.last_reason in ("no_prediction",
-                                                          "no_rankable_candidate")
+            assert out == [] and planner.last_reason in ("no_prediction", "no_rankable_candidate")
     assert quiet.plan(floor_only(SR300), SR300) == [] and quiet.last_reason == "no_prediction"
     assert firing.plan(floor_only(SR300), SR300)  # the untrained net "grasps" the floor: valid
 
@@ -340,8 +387,10 @@ def test_dexnet_examples(name):
     for planner in dexnet_planners(half=0.08):
         out = planner.plan(image, SMALL)
         assert out == []
-        assert planner.last_reason == {"empty_bin": "no_object_pixels",
-                                       "one_pixel": "no_candidates"}.get(name, "no_valid_depth")
+        assert planner.last_reason == {
+            "empty_bin": "no_object_pixels",
+            "one_pixel": "no_candidates",
+        }.get(name, "no_valid_depth")
         res = planner.run_cem(image, SMALL, np.random.default_rng(0))
         assert len(res.best) == 0 and res.best_score == -np.inf
 
@@ -354,7 +403,7 @@ def test_dexnet_few_acceptable_pixels_with_the_full_cem(count):
     d = np.zeros((SMALL.height, SMALL.width), np.float32)
     centres = [(6, 6), (6, 20), (20, 6), (20, 20), (13, 13)][:count]  # (v, u)
     for v, u in centres:
-        d[v - 1:v + 2, u - 1:u + 2] = 0.5
+        d[v - 1 : v + 2, u - 1 : u + 2] = 0.5
     for planner in dexnet_planners(default_config(CEMConfig)):
         out = planner.plan(d, SMALL)
         assert len(out) == 1 and (int(out[0].v), int(out[0].u)) in centres
@@ -366,8 +415,7 @@ def test_descriptor_examples(name):
     image = EXAMPLES[name](MID)
     result = describe_surface(image, MID, (MID.width // 2, MID.height // 2), DESCRIPTOR)
     assert_descriptor_result(image, result)
-    expected = {"empty_bin": "", "one_pixel": "too_few_window_points"}.get(name,
-                                                                          "no_depth_at_seed")
+    expected = {"empty_bin": "", "one_pixel": "too_few_window_points"}.get(name, "no_depth_at_seed")
     assert result[1] == expected
     if name == "empty_bin":  # the floor is a plane: a surface, at the floor's depth
         assert result[0].center_cam[2] == pytest.approx(FLOOR, abs=1e-4)
@@ -435,14 +483,18 @@ def test_descriptor_rejects_a_malformed_seed():
 # ---------------------------------------------------------------------------------------------
 # Model files.
 
+
 def model_blob(net: GraspNet, network: dict | None = None) -> dict:
-    """As ``pipeline.train`` writes model.pt."""
-    return {"state_dict": net.state_dict(),
-            "network": network or dataclasses.asdict(net.cfg),
-            "normalisation": Normalisation(D_GROUND, 0.1, 0.5).as_dict(),
-            "ranking": dataclasses.asdict(default_config(RankingConfig, d_ground=D_GROUND,
-                                                          threshold=0.5)),
-            "classes": ["R", "L", "B", "NG"]}
+    """As ``pipeline.stages.train`` writes model.pt."""
+    return {
+        "state_dict": net.state_dict(),
+        "network": network or dataclasses.asdict(net.cfg),
+        "normalisation": Normalisation(D_GROUND, 0.1, 0.5).as_dict(),
+        "ranking": dataclasses.asdict(
+            default_config(RankingConfig, d_ground=D_GROUND, threshold=0.5)
+        ),
+        "classes": ["R", "L", "B", "NG"],
+    }
 
 
 @pytest.fixture(scope="module")
@@ -476,18 +528,24 @@ def test_planner_load_of_a_good_file(model_files):
     assert planner.plan(floor_only(SR300), SR300) == []  # the class prior: nothing above th
 
 
-@pytest.mark.parametrize("name,pattern", [
-    ("width_mismatch", r"another shape \(e\.g\. stage16\.0\.conv\.weight: file \(1, 1, 3, 3\), "
-                       r"network \(2, 1, 3, 3\)"),
-    ("missing_keys", "3 tensor\\(s\\) missing"),
-    ("unexpected_keys", "unexpected tensor.*head.extra"),
-    ("no_network_entry", "lacks network, normalisation, ranking"),
-    ("unknown_config_field", "unexpected keyword argument 'depth'"),
-    ("not_a_dict", "holds a list"),
-    ("truncated", "not a readable"),
-    ("garbage", "not a readable"),
-    ("empty", "not a readable"),
-])
+@pytest.mark.parametrize(
+    "name,pattern",
+    [
+        (
+            "width_mismatch",
+            r"another shape \(e\.g\. stage16\.0\.conv\.weight: file \(1, 1, 3, 3\), "
+            r"network \(2, 1, 3, 3\)",
+        ),
+        ("missing_keys", "3 tensor\\(s\\) missing"),
+        ("unexpected_keys", "unexpected tensor.*head.extra"),
+        ("no_network_entry", "lacks network, normalisation, ranking"),
+        ("unknown_config_field", "unexpected keyword argument 'depth'"),
+        ("not_a_dict", "holds a list"),
+        ("truncated", "not a readable"),
+        ("garbage", "not a readable"),
+        ("empty", "not a readable"),
+    ],
+)
 def test_planner_load_names_file_problem_and_fix(model_files, name, pattern):
     path = model_files / f"{name}.pt"
     with pytest.raises(ModelFileError, match=pattern) as info:
@@ -500,16 +558,30 @@ def test_planner_load_names_file_problem_and_fix(model_files, name, pattern):
 def test_load_gqcnn_names_file_problem_and_fix(tmp_path, model_files):
     g = tiny_gqcnn()
     crop = dataclasses.asdict(default_config(CropConfig))
-    torch.save({"network": {"crop_size": 8, "width": 2, "fc": 8}, "crop": crop,
-                "state_dict": g.state_dict()}, tmp_path / "good.pt")
+    torch.save(
+        {
+            "network": {"crop_size": 8, "width": 2, "fc": 8},
+            "crop": crop,
+            "state_dict": g.state_dict(),
+        },
+        tmp_path / "good.pt",
+    )
     net, _ = load_gqcnn(tmp_path / "good.pt")
     assert isinstance(net, GQCNN)
-    torch.save({"network": {"crop_size": 8, "width": 4, "fc": 8}, "crop": crop,
-                "state_dict": g.state_dict()}, tmp_path / "width.pt")
-    for path, pattern in [(tmp_path / "width.pt", "another shape"),
-                          (model_files / "truncated.pt", "not a readable"),
-                          (model_files / "garbage.pt", "not a readable"),
-                          (model_files / "good.pt", "lacks crop")]:
+    torch.save(
+        {
+            "network": {"crop_size": 8, "width": 4, "fc": 8},
+            "crop": crop,
+            "state_dict": g.state_dict(),
+        },
+        tmp_path / "width.pt",
+    )
+    for path, pattern in [
+        (tmp_path / "width.pt", "another shape"),
+        (model_files / "truncated.pt", "not a readable"),
+        (model_files / "garbage.pt", "not a readable"),
+        (model_files / "good.pt", "lacks crop"),
+    ]:
         with pytest.raises(ModelFileError, match=pattern) as info:
             load_gqcnn(path)
         assert str(path) in str(info.value) and "make baseline" in str(info.value)

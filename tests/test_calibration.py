@@ -8,18 +8,22 @@ import math
 import numpy as np
 import pytest
 
-from pipeline.labelling.types import GraspClass
+from pipeline.grasping.types import GraspClass
 from pipeline.planner.calibration import choose_threshold, gopt_correct, threshold_curve
 from pipeline.planner.evaluate import ImagePredictions, precision_table
-from pipeline.train import best_epoch, should_stop
+from pipeline.planner.fit import best_epoch, should_stop
 
 R, L, B, NG = (int(c) for c in GraspClass)
 
 
 def _img(uv, classes, probs, gt_uv, gt_classes):
-    return ImagePredictions(np.array(uv, float).reshape(-1, 2), np.array(classes, int),
-                            np.array(probs, float), np.array(gt_uv, float).reshape(-1, 2),
-                       np.array(gt_classes, int))
+    return ImagePredictions(
+        np.array(uv, float).reshape(-1, 2),
+        np.array(classes, int),
+        np.array(probs, float),
+        np.array(gt_uv, float).reshape(-1, 2),
+        np.array(gt_classes, int),
+    )
 
 
 # Three validation images, candidates already in Eq. 7's order.
@@ -75,9 +79,13 @@ def test_choice_needs_a_scored_image():
 
 
 def _pred(uv, classes, scores, gt_uv, gt_classes):
-    return ImagePredictions(np.array(uv, float).reshape(-1, 2), np.array(classes, int),
-                            np.array(scores, float), np.array(gt_uv, float).reshape(-1, 2),
-                            np.array(gt_classes, int))
+    return ImagePredictions(
+        np.array(uv, float).reshape(-1, 2),
+        np.array(classes, int),
+        np.array(scores, float),
+        np.array(gt_uv, float).reshape(-1, 2),
+        np.array(gt_classes, int),
+    )
 
 
 def test_table1_strict_definitions_by_hand():
@@ -85,8 +93,13 @@ def test_table1_strict_definitions_by_hand():
     #   ✗ (that L is taken), R (300, 305) 0.3 ✓.
     # Image Q: gt B (50, 50). Prediction: B (60, 50) 0.2 ✓ (below th = 0.25).
     # Image S: gt NG only. Prediction: L (10, 10) 0.95 ✗ (no graspable truth; not scored).
-    p = _pred([[105, 100], [102, 100], [300, 305]], [L, L, R], [0.9, 0.4, 0.3],
-              [[100, 100], [300, 300]], [L, R])
+    p = _pred(
+        [[105, 100], [102, 100], [300, 305]],
+        [L, L, R],
+        [0.9, 0.4, 0.3],
+        [[100, 100], [300, 300]],
+        [L, R],
+    )
     q = _pred([[60, 50]], [B], [0.2], [[50, 50]], [B])
     s = _pred([[10, 10]], [L], [0.95], [[10, 10]], [NG])
     t = precision_table([p, q, s], 16.0, threshold=0.25)

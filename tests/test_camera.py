@@ -9,7 +9,12 @@ import pybullet as p
 import pytest
 
 from pipeline.camera.geometry import (
-    Intrinsics, backproject, backproject_pixels, camera_pose_above_bin, pose_matrix, project,
+    Intrinsics,
+    backproject,
+    backproject_pixels,
+    camera_pose_above_bin,
+    pose_matrix,
+    project,
     world_to_camera,
 )
 from pipeline.camera.render import render_depth
@@ -17,12 +22,15 @@ from pipeline.cell.bin import build_cell
 
 SR300 = Intrinsics(416, 416, 411.7, 411.7, 207.5, 207.5)
 CAM_HEIGHT = 0.625
-BIN = NS(inner_length_x=0.40, inner_width_y=0.30, wall_height=0.15, wall_thickness=0.01,
-         floor_thickness=0.02, lateral_friction=0.5)
+BIN = NS(
+    inner_length_x=0.40,
+    inner_width_y=0.30,
+    wall_height=0.15,
+    wall_thickness=0.01,
+    floor_thickness=0.02,
+    lateral_friction=0.5,
+)
 PHYS = NS(gravity=-9.81, time_step=1 / 240, solver_iterations=50, friction_anchor=True)
-
-
-
 
 
 def test_project_backproject_by_hand():
@@ -41,8 +49,7 @@ def test_backproject_pixels_by_hand():
     """The same point as above back from its pixel (289.84, 248.67) at z = 0.5 m, and a batch
     of two: the principal point at 1 m is (0, 0, 1); pixel (0, 415) at 0.5 m as above."""
     assert backproject_pixels([289.84, 248.67], 0.5, SR300) == pytest.approx([0.1, 0.05, 0.5])
-    pts = backproject_pixels(np.array([[207.5, 207.5], [0.0, 415.0]]), np.array([1.0, 0.5]),
-                             SR300)
+    pts = backproject_pixels(np.array([[207.5, 207.5], [0.0, 415.0]]), np.array([1.0, 0.5]), SR300)
     assert pts.shape == (2, 3)
     np.testing.assert_allclose(pts, [[0, 0, 1], [-0.252004, 0.252004, 0.5]], atol=1e-6)
 
@@ -67,8 +74,15 @@ RENDERERS = ["tinyrenderer", "raycast"]
 def test_floor_and_ground_depth(client, renderer):
     build_cell(client, BIN, PHYS)
     ground = p.getBodyUniqueId(0, physicsClientId=client)
-    frame = render_depth(client, SR300, camera_pose_above_bin(CAM_HEIGHT), 0.1, 2.0,
-                         ground=(-BIN.floor_thickness, ground), renderer=renderer)
+    frame = render_depth(
+        client,
+        SR300,
+        camera_pose_above_bin(CAM_HEIGHT),
+        0.1,
+        2.0,
+        ground=(-BIN.floor_thickness, ground),
+        renderer=renderer,
+    )
     # Bin floor straight below: 0.625 m to 1 mm (the issue's requirement; in fact ~1e-6 m).
     assert abs(frame.depth_m[208, 208] - 0.625) < 1e-3
     # Image corner sees the ground, 20 mm below the bin floor (filled analytically).
@@ -97,8 +111,9 @@ def test_box_top_height_and_corner_pixel(client, renderer, static_box):
     # The depth back-projects to the box top: the 3-D point at pixel (269, 196) is the corner
     # minus less than one pixel.
     pts = backproject(frame.depth_m, SR300)
-    assert pts[196, 269] == pytest.approx(world_to_camera(np.array([0.09, 0.0175, 0.023]), T),
-                                          abs=2e-3)
+    assert pts[196, 269] == pytest.approx(
+        world_to_camera(np.array([0.09, 0.0175, 0.023]), T), abs=2e-3
+    )
 
 
 @pytest.mark.parametrize("renderer", RENDERERS)
@@ -132,10 +147,13 @@ def test_raster_samples_pixel_centres(client, axis, renderer, static_box):
     assert np.abs(np.median(err[100:300, 100:300])) < 0.02
 
 
-@pytest.mark.parametrize("axis,angle", [((0, 0, 1), 90), ((1, 1, 0), 180), ((1, -2, 3), 180),
-                                        ((0, 1, 0), 179.9), ((2, 1, -1), 37)])
+@pytest.mark.parametrize(
+    "axis,angle",
+    [((0, 0, 1), 90), ((1, 1, 0), 180), ((1, -2, 3), 180), ((0, 1, 0), 179.9), ((2, 1, -1), 37)],
+)
 def test_quat_from_matrix_including_half_turns(axis, angle):
     from pipeline.camera.geometry import quat_from_matrix
+
     a = np.asarray(axis, float) / np.linalg.norm(axis)
     h = np.radians(angle) / 2
     q_true = np.r_[a * np.sin(h), np.cos(h)]  # (x, y, z, w) by the axis-angle formula

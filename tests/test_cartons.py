@@ -9,7 +9,7 @@ import pybullet as p
 import pytest
 from omegaconf import OmegaConf
 
-from pipeline.cli import compose
+from pipeline.runtime.cli import compose
 from pipeline.simulation.cartons import check_cartons, draw_carton, is_held_out
 
 
@@ -60,11 +60,14 @@ def test_every_unseen_size_is_held_out(cfg):
         assert not is_held_out(s, c.held_out, c.held_out_margin), s
 
 
-@pytest.mark.parametrize("change, key", [
-    (dict(long_edge=[0.2, 0.1]), "long_edge"),
-    (dict(short_ratio=[0.5, 1.5]), "short_ratio"),
-    (dict(max_mass=0.0), "max_mass"),
-])
+@pytest.mark.parametrize(
+    "change, key",
+    [
+        (dict(long_edge=[0.2, 0.1]), "long_edge"),
+        (dict(short_ratio=[0.5, 1.5]), "short_ratio"),
+        (dict(max_mass=0.0), "max_mass"),
+    ],
+)
 def test_bad_distribution_is_named(cfg, change, key):
     with pytest.raises(ValueError, match=key):
         check_cartons(dataclasses.replace(cfg.boxes.cartons, **change))
@@ -83,8 +86,9 @@ def test_carton_heap_bodies_have_their_drawn_size_and_mass(cfg):
     client = p.connect(p.DIRECT)
     try:
         build_cell(client, cfg.bin, cfg.physics)
-        heap = drop_heap(client, np.random.default_rng(5), cfg.boxes, cfg.bin, cfg.physics,
-                         cartons=True)
+        heap = drop_heap(
+            client, np.random.default_rng(5), cfg.boxes, cfg.bin, cfg.physics, cartons=True
+        )
         assert heap.boxes
         for box in heap.boxes:
             assert box.type_index == len(cfg.boxes.types)
@@ -94,8 +98,14 @@ def test_carton_heap_bodies_have_their_drawn_size_and_mass(cfg):
             assert mass == pytest.approx(box.mass)
             assert box.mass <= cfg.hand.payload_kg
         with pytest.raises(ValueError, match="boxes.cartons is not set"):
-            drop_heap(client, np.random.default_rng(5), dataclasses.replace(cfg.boxes,
-                      cartons=None), cfg.bin, cfg.physics, cartons=True)
+            drop_heap(
+                client,
+                np.random.default_rng(5),
+                dataclasses.replace(cfg.boxes, cartons=None),
+                cfg.bin,
+                cfg.physics,
+                cartons=True,
+            )
     finally:
         p.disconnect(client)
 
@@ -104,12 +114,22 @@ def test_generated_cartons_in_train_exact_types_in_test(tmp_path):
     """boxes=cartons: the train split's boxes are cartons (type index len(types), their mass
     stored), the test split keeps the paper's exact sizes with density x volume."""
     from pipeline.dataset import SceneDataset
-    from pipeline.generate import generate
+    from pipeline.stages.generate import generate
 
-    cfg = compose("generate", ["experiment=smoke", "boxes=cartons", f"paths.root={tmp_path}",
-                               "generate.num_scenes=2", "generate.num_val_scenes=1",
-                               "generate.num_test_scenes=2", "generate.scenes_per_shard=2",
-                               "generate.workers=1", "logging.progress=false"])
+    cfg = compose(
+        "generate",
+        [
+            "experiment=smoke",
+            "boxes=cartons",
+            f"paths.root={tmp_path}",
+            "generate.num_scenes=2",
+            "generate.num_val_scenes=1",
+            "generate.num_test_scenes=2",
+            "generate.scenes_per_shard=2",
+            "generate.workers=1",
+            "logging.progress=false",
+        ],
+    )
     out = generate(cfg)
     train, test = SceneDataset(out, "train"), SceneDataset(out, "test")
     boxes = [b for i in range(len(train)) for b in train[i].boxes]
@@ -144,7 +164,7 @@ def test_hold_mass_heaviest_weighs_drawn_cartons_only(cfg):
     700 × 0.0006 = 0.42 kg, whatever it drew; a box of a fixed set (no mass) is left alone;
     own leaves every box as it is; a box set without cartons is refused, with the fix named."""
     from pipeline.dataset.scenes import Box
-    from pipeline.label import weighed_for_hold
+    from pipeline.stages.label import weighed_for_hold
 
     eye = np.eye(4)
     carton = Box(1, -1, "carton", np.array([0.12, 0.10, 0.05]), eye, eye, mass=0.1)
@@ -155,8 +175,9 @@ def test_hold_mass_heaviest_weighs_drawn_cartons_only(cfg):
     assert out.boxes[0].mass == pytest.approx(0.42) and out.boxes[1].mass is None
     assert scene.boxes[0].mass == 0.1  # the scene itself is not changed
     assert weighed_for_hold(scene, cfg) is scene  # own, the default
-    paper_cfg = OmegaConf.to_object(compose("label", ["experiment=smoke",
-                                                      "label.hold_mass=heaviest"]))
+    paper_cfg = OmegaConf.to_object(
+        compose("label", ["experiment=smoke", "label.hold_mass=heaviest"])
+    )
     with pytest.raises(ValueError, match="use boxes=cartons"):
         weighed_for_hold(scene, paper_cfg)
     bad = dataclasses.replace(cfg, label=dataclasses.replace(cfg.label, hold_mass="light"))

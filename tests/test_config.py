@@ -9,12 +9,21 @@ from pathlib import Path
 import pytest
 from omegaconf import MISSING, OmegaConf
 
-from pipeline.cli import CONF_DIR, compose
-from pipeline.config import schema
+from pipeline.config import physical, schema, stage_sections
 from pipeline.config.build import from_section
+from pipeline.runtime.cli import CONF_DIR, compose
 
-ROOTS = ("generate", "label", "train", "baseline", "evaluate", "unseen", "ablation",
-         "robustness", "report")
+ROOTS = (
+    "generate",
+    "label",
+    "train",
+    "baseline",
+    "evaluate",
+    "unseen",
+    "ablation",
+    "robustness",
+    "report",
+)
 
 
 @dataclasses.dataclass
@@ -38,20 +47,29 @@ def test_from_section_by_hand():
 
 def test_schema_fields_have_no_defaults():
     """The schema gives types only: a value written there as well as in conf/ could differ."""
-    for cls in vars(schema).values():
-        if not (isinstance(cls, type) and dataclasses.is_dataclass(cls)) or \
-                cls.__module__ != schema.__name__:
-            continue
+    modules = (schema, physical, stage_sections)
+    classes = {
+        cls
+        for module in modules
+        for cls in vars(module).values()
+        if isinstance(cls, type)
+        and dataclasses.is_dataclass(cls)
+        and cls.__module__ == module.__name__
+    }
+    assert len(classes) > 30  # every section of the schema is checked
+    for cls in classes:
         for f in dataclasses.fields(cls):
-            nested = f.default_factory is not dataclasses.MISSING and \
-                dataclasses.is_dataclass(f.default_factory)
+            nested = f.default_factory is not dataclasses.MISSING and dataclasses.is_dataclass(
+                f.default_factory
+            )
             assert f.default is MISSING or nested, f"{cls.__name__}.{f.name} has a default"
 
 
 @pytest.mark.parametrize("root", ROOTS)
 def test_every_stage_config_is_complete(root):
-    runs = [[f"experiment={e}"] for e in ("smoke", "default", "paper")] + \
-        [["experiment=smoke", extra] for extra in ("sensor=sr300", "executor=ray", "planner=dcnn")]
+    runs = [[f"experiment={e}"] for e in ("smoke", "default", "paper")] + [
+        ["experiment=smoke", extra] for extra in ("sensor=sr300", "executor=ray", "planner=dcnn")
+    ]
     for overrides in runs:
         assert OmegaConf.missing_keys(compose(root, overrides)) == set(), (root, overrides)
 

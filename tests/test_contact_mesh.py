@@ -19,14 +19,18 @@ from types import SimpleNamespace as NS
 import numpy as np
 import pybullet as p
 import pytest
-
 from conftest import default_config
+
 from pipeline.camera.geometry import Intrinsics, backproject, camera_pose_above_bin, pose_matrix
 from pipeline.camera.render import render_depth
-from pipeline.dexnet.contact import REASONS, SuctionModelConfig, evaluate_contacts, robust_quality
+from pipeline.dexnet.contact import REASONS, evaluate_contacts, robust_quality
 from pipeline.dexnet.contact_mesh import (
-    MAX_NORMAL_ANGLE_DEG, RayScene, evaluate_contacts_mesh, robust_quality_mesh,
+    MAX_NORMAL_ANGLE_DEG,
+    RayScene,
+    evaluate_contacts_mesh,
+    robust_quality_mesh,
 )
+from pipeline.grasping.suction import SuctionModelConfig
 from pipeline.simulation.objects import create_body, cylinder
 
 CFG = default_config(SuctionModelConfig)
@@ -54,15 +58,29 @@ def _box(client: int, size, position, quat=(0.0, 0.0, 0.0, 1.0), inertial_offset
     half = (np.asarray(size, float) / 2).tolist()
     col = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client)
     vis = p.createVisualShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client)
-    return p.createMultiBody(DENSITY * float(np.prod(size)), col, vis, basePosition=position,
-                             baseOrientation=quat, baseInertialFramePosition=list(inertial_offset),
-                             physicsClientId=client)
+    return p.createMultiBody(
+        DENSITY * float(np.prod(size)),
+        col,
+        vis,
+        basePosition=position,
+        baseOrientation=quat,
+        baseInertialFramePosition=list(inertial_offset),
+        physicsClientId=client,
+    )
 
 
 def _images(client, intr, T_world_cam, floor, bodies, renderer):
     """Depth and instance mask (k for ``bodies[k-1]``) of the scene."""
-    frame = render_depth(client, intr, T_world_cam, 0.1, 2.0, renderer=renderer,
-                         ground=(0.0, floor), bodies=bodies if renderer == "raycast" else None)
+    frame = render_depth(
+        client,
+        intr,
+        T_world_cam,
+        0.1,
+        2.0,
+        renderer=renderer,
+        ground=(0.0, floor),
+        bodies=bodies if renderer == "raycast" else None,
+    )
     lut = np.zeros(max(int(frame.body_ids.max()), max(bodies)) + 2, np.uint8)
     for k, body in enumerate(bodies, start=1):
         lut[body + 1] = k
@@ -82,9 +100,11 @@ def box_scene(client):
     about world x, so that its +y face (normal (0, cos 30, sin 30), 60 deg from vertical) faces
     up and towards the camera."""
     floor = _floor(client)
-    bodies = [_box(client, BIG, [0, 0, 0.025]),
-              _box(client, THIN, [-0.04, 0.02, 0.052]),
-              _box(client, CUBE, [0.0, -0.1, 0.06], p.getQuaternionFromEuler([TILT, 0, 0]))]
+    bodies = [
+        _box(client, BIG, [0, 0, 0.025]),
+        _box(client, THIN, [-0.04, 0.02, 0.052]),
+        _box(client, CUBE, [0.0, -0.1, 0.06], p.getQuaternionFromEuler([TILT, 0, 0])),
+    ]
     depth, mask = _images(client, INTR_BOX, T_DOWN, floor, bodies, "raycast")
     T_cam_world = np.linalg.inv(T_DOWN)
     boxes = []
@@ -104,10 +124,22 @@ def _cam_dir(dirs_world) -> np.ndarray:
 
 
 def _both(scene, points_cam, axes_cam, **kw):
-    analytic = evaluate_contacts(points_cam, axes_cam, scene.depth, scene.mask, INTR_BOX,
-                                 scene.boxes, DOWN, CFG)
-    mesh = evaluate_contacts_mesh(points_cam, axes_cam, scene.depth, scene.mask, INTR_BOX,
-                                  T_DOWN, scene.client, scene.bodies, DOWN, CFG, **kw)
+    analytic = evaluate_contacts(
+        points_cam, axes_cam, scene.depth, scene.mask, INTR_BOX, scene.boxes, DOWN, CFG
+    )
+    mesh = evaluate_contacts_mesh(
+        points_cam,
+        axes_cam,
+        scene.depth,
+        scene.mask,
+        INTR_BOX,
+        T_DOWN,
+        scene.client,
+        scene.bodies,
+        DOWN,
+        CFG,
+        **kw,
+    )
     return analytic, mesh
 
 
@@ -117,30 +149,75 @@ _CUBE_Y_FACE = np.array([0.0, -0.1, 0.06]) + 0.03 * _N_CUBE_Y
 
 # (world point, world approach axis, expected reason, expected instance, why)
 NAMED = [
-    ((0.0, 0.0, 0.05), (0, 0, -1), "ok", 1,
-     "centre of BIG's top: rim 9 mm inside 72.5 x 46 mm; m = 400 x 6.67e-4 = 0.2668 kg, weight "
-     "2.617 N along a, f_N = 10.08 N; COM straight below: no torque"),
-    ((0.0705, 0.0, 0.05), (0, 0, -1), "off_face", 1,
-     "2 mm inside BIG's +x edge: the rim reaches x = 79.5 mm > 72.5 mm and misses the box"),
-    ((0.0575, 0.0, 0.05), (0, 0, -1), "bending", 1,
-     "57.5 mm from the COM: torque 0.0575 x 2.617 = 0.150 N m > r f_N = 0.0907 N m"),
-    ((0.0, 0.01, 0.05), (np.sin(TILT), 0, -np.cos(TILT)), "uneven", 1,
-     "approach tilted 30 deg on the level face: spread 2 r tan 30 deg = 10.4 mm > 3 mm"),
-    ((0.12, 0.0, 0.0), (0, 0, -1), "not_on_box", 0,
-     "the floor, 47.5 mm beyond BIG's +x edge: the first body hit is not graspable"),
-    ((-0.04, 0.0, 0.05), (0, 0, -1), "occluded", 1,
-     "on BIG 5 mm beside THIN: the centre line misses THIN, the rim point at y = 9 mm is seen "
-     "through pixel v = rint(119.5 - 300 x 0.009 / 0.5) = 114, whose ray meets THIN's top at "
-     "y = 5.5 / 300 x 0.496 = 9.1 mm: mask 2 there, not 1"),
-    ((-0.04, 0.02, 0.054), (0, 0, -1), "ok", 2,
-     "on THIN (the first body along the line): 15 mm half extents hold the rim; 1.4 g"),
-    (tuple(_CUBE_Y_FACE), tuple(-_N_CUBE_Y), "ok", 3,
-     "centre of CUBE's +y face (60 x 70 mm), approach along -n: m = 400 x 2.52e-4 = 0.1008 kg, "
-     "W = 0.989 N; pull W cos 60 = 0.494 N, f_N = 12.21 N; shear W sin 60 = 0.856 <= 6.10 N; "
-     "COM 30 mm behind the face: torque 0.03 W sin 60 = 0.0257 N m, all of it bending, "
-     "<= r f_N = 0.110 N m"),
-    ((0.0725 - 0.00895, 0.0, 0.05), (-_S5, 0, -_C5), "off_face", 1,
-     "the rim crosses BIG's +x edge and lands on the +x face: see test_normal_rule_at_an_edge"),
+    (
+        (0.0, 0.0, 0.05),
+        (0, 0, -1),
+        "ok",
+        1,
+        "centre of BIG's top: rim 9 mm inside 72.5 x 46 mm; m = 400 x 6.67e-4 = 0.2668 kg, weight "
+        "2.617 N along a, f_N = 10.08 N; COM straight below: no torque",
+    ),
+    (
+        (0.0705, 0.0, 0.05),
+        (0, 0, -1),
+        "off_face",
+        1,
+        "2 mm inside BIG's +x edge: the rim reaches x = 79.5 mm > 72.5 mm and misses the box",
+    ),
+    (
+        (0.0575, 0.0, 0.05),
+        (0, 0, -1),
+        "bending",
+        1,
+        "57.5 mm from the COM: torque 0.0575 x 2.617 = 0.150 N m > r f_N = 0.0907 N m",
+    ),
+    (
+        (0.0, 0.01, 0.05),
+        (np.sin(TILT), 0, -np.cos(TILT)),
+        "uneven",
+        1,
+        "approach tilted 30 deg on the level face: spread 2 r tan 30 deg = 10.4 mm > 3 mm",
+    ),
+    (
+        (0.12, 0.0, 0.0),
+        (0, 0, -1),
+        "not_on_box",
+        0,
+        "the floor, 47.5 mm beyond BIG's +x edge: the first body hit is not graspable",
+    ),
+    (
+        (-0.04, 0.0, 0.05),
+        (0, 0, -1),
+        "occluded",
+        1,
+        "on BIG 5 mm beside THIN: the centre line misses THIN, the rim point at y = 9 mm is seen "
+        "through pixel v = rint(119.5 - 300 x 0.009 / 0.5) = 114, whose ray meets THIN's top at "
+        "y = 5.5 / 300 x 0.496 = 9.1 mm: mask 2 there, not 1",
+    ),
+    (
+        (-0.04, 0.02, 0.054),
+        (0, 0, -1),
+        "ok",
+        2,
+        "on THIN (the first body along the line): 15 mm half extents hold the rim; 1.4 g",
+    ),
+    (
+        tuple(_CUBE_Y_FACE),
+        tuple(-_N_CUBE_Y),
+        "ok",
+        3,
+        "centre of CUBE's +y face (60 x 70 mm), approach along -n: m = 400 x 2.52e-4 = 0.1008 kg, "
+        "W = 0.989 N; pull W cos 60 = 0.494 N, f_N = 12.21 N; shear W sin 60 = 0.856 <= 6.10 N; "
+        "COM 30 mm behind the face: torque 0.03 W sin 60 = 0.0257 N m, all of it bending, "
+        "<= r f_N = 0.110 N m",
+    ),
+    (
+        (0.0725 - 0.00895, 0.0, 0.05),
+        (-_S5, 0, -_C5),
+        "off_face",
+        1,
+        "the rim crosses BIG's +x edge and lands on the +x face: see test_normal_rule_at_an_edge",
+    ),
 ]
 
 
@@ -199,13 +276,38 @@ def test_robust_quality_matches_the_analytic_model(box_scene):
     points = _cam([c[0] for c in NAMED])
     axes = _cam_dir([c[1] for c in NAMED])
     s = box_scene
-    q = robust_quality(points, axes, s.depth, s.mask, INTR_BOX, s.boxes, DOWN, CFG,
-                       np.random.default_rng(5))
+    q = robust_quality(
+        points, axes, s.depth, s.mask, INTR_BOX, s.boxes, DOWN, CFG, np.random.default_rng(5)
+    )
     with RayScene(s.client) as rays:
-        qm = robust_quality_mesh(points, axes, s.depth, s.mask, INTR_BOX, T_DOWN, s.client,
-                                 s.bodies, DOWN, CFG, np.random.default_rng(5), rays=rays)
-        again = robust_quality_mesh(points, axes, s.depth, s.mask, INTR_BOX, T_DOWN, s.client,
-                                    s.bodies, DOWN, CFG, np.random.default_rng(5), rays=rays)
+        qm = robust_quality_mesh(
+            points,
+            axes,
+            s.depth,
+            s.mask,
+            INTR_BOX,
+            T_DOWN,
+            s.client,
+            s.bodies,
+            DOWN,
+            CFG,
+            np.random.default_rng(5),
+            rays=rays,
+        )
+        again = robust_quality_mesh(
+            points,
+            axes,
+            s.depth,
+            s.mask,
+            INTR_BOX,
+            T_DOWN,
+            s.client,
+            s.bodies,
+            DOWN,
+            CFG,
+            np.random.default_rng(5),
+            rays=rays,
+        )
     np.testing.assert_array_equal(qm, q)  # the same perturbations, labelled alike
     np.testing.assert_array_equal(qm, again)
     assert qm[0] >= 0.8 and qm[1] <= 0.1 and qm[4] == 0.0  # centre, edge, floor
@@ -219,10 +321,12 @@ def test_targets_and_a_reused_ray_scene(box_scene):
     free = evaluate_contacts_mesh(points, axes, *args)
     with RayScene(s.client) as rays:
         reused = evaluate_contacts_mesh(points, axes, *args, rays=rays)
-        right = evaluate_contacts_mesh(points, axes, *args, rays=rays,
-                                       targets=[s.bodies[0], s.bodies[1]])
-        wrong = evaluate_contacts_mesh(points, axes, *args, rays=rays,
-                                       targets=[s.bodies[1], s.bodies[0]])
+        right = evaluate_contacts_mesh(
+            points, axes, *args, rays=rays, targets=[s.bodies[0], s.bodies[1]]
+        )
+        wrong = evaluate_contacts_mesh(
+            points, axes, *args, rays=rays, targets=[s.bodies[1], s.bodies[0]]
+        )
     assert _reasons(free) == _reasons(reused) == _reasons(right) == ["ok", "ok"]
     # Meant for THIN, but the centre line first meets BIG (and the other way round).
     assert _reasons(wrong) == ["not_on_box", "not_on_box"] and wrong.instance.tolist() == [0, 0]
@@ -252,20 +356,41 @@ def test_ray_scene_places_shapes_with_offset_frames(client):
     # from the link frame, and whose inertial frame is 50 mm along +x: link frame at
     # (0, 0, 0.5), so the cylinder spans z in [0.47, 0.57] about the axis x = y = 0.
     shape = cylinder(0.03, 0.10)
-    col = p.createCollisionShape(p.GEOM_MESH, vertices=shape.vertices.tolist(),
-                                 collisionFramePosition=[0.0, 0.0, 0.02], physicsClientId=client)
-    tube = p.createMultiBody(1.0, col, -1, basePosition=[0, 0, 0.5],
-                             baseInertialFramePosition=[0.05, 0, 0], physicsClientId=client)
+    col = p.createCollisionShape(
+        p.GEOM_MESH,
+        vertices=shape.vertices.tolist(),
+        collisionFramePosition=[0.0, 0.0, 0.02],
+        physicsClientId=client,
+    )
+    tube = p.createMultiBody(
+        1.0,
+        col,
+        -1,
+        basePosition=[0, 0, 0.5],
+        baseInertialFramePosition=[0.05, 0, 0],
+        physicsClientId=client,
+    )
     # A 40 mm cube, collision frame 10 mm along +x, inertial frame 20 mm along +y: link frame at
     # (0.5, 0, 0.5), cube centred at (0.51, 0, 0.5), top at z = 0.52, x in [0.49, 0.53].
-    col = p.createCollisionShape(p.GEOM_BOX, halfExtents=[0.02] * 3,
-                                 collisionFramePosition=[0.01, 0, 0], physicsClientId=client)
-    cube = p.createMultiBody(1.0, col, -1, basePosition=[0.5, 0, 0.5],
-                             baseInertialFramePosition=[0, 0.02, 0], physicsClientId=client)
+    col = p.createCollisionShape(
+        p.GEOM_BOX,
+        halfExtents=[0.02] * 3,
+        collisionFramePosition=[0.01, 0, 0],
+        physicsClientId=client,
+    )
+    cube = p.createMultiBody(
+        1.0,
+        col,
+        -1,
+        basePosition=[0.5, 0, 0.5],
+        baseInertialFramePosition=[0, 0.02, 0],
+        physicsClientId=client,
+    )
     down = [[0.0, 0.0, -1.0]] * 4
     with RayScene(client) as rays:
-        body, dist, _ = rays.cast([[0, 0, 1.0], [0.525, 0, 1.0], [0.535, 0, 1.0], [0.06, 0, 1.0]],
-                                  down)
+        body, dist, _ = rays.cast(
+            [[0, 0, 1.0], [0.525, 0, 1.0], [0.535, 0, 1.0], [0.06, 0, 1.0]], down
+        )
         body_x, dist_x, _ = rays.cast([[0.2, 0.0, 0.5]], [[-1.0, 0.0, 0.0]])
     assert body.tolist() == [tube, cube, -1, -1]
     np.testing.assert_allclose(dist[:2], [1.0 - 0.57, 1.0 - 0.52], atol=1e-12)
@@ -278,11 +403,22 @@ def test_centre_of_mass_is_the_inertial_frame(client):
     # top's centre then holds 0.04 x 2.617 = 0.105 N m > r f_N = 0.0907 N m: bending.
     floor = _floor(client)
     big = _box(client, BIG, [0, 0, 0.025], inertial_offset=(0.04, 0.0, 0.0))
-    np.testing.assert_allclose(p.getBasePositionAndOrientation(big, physicsClientId=client)[0],
-                               [0.04, 0.0, 0.025])
+    np.testing.assert_allclose(
+        p.getBasePositionAndOrientation(big, physicsClientId=client)[0], [0.04, 0.0, 0.025]
+    )
     depth, mask = _images(client, INTR_BOX, T_DOWN, floor, [big], "raycast")
-    res = evaluate_contacts_mesh(_cam([(0.0, 0.0, 0.05)]), _cam_dir([(0, 0, -1)]), depth, mask,
-                                 INTR_BOX, T_DOWN, client, [big], DOWN, CFG)
+    res = evaluate_contacts_mesh(
+        _cam([(0.0, 0.0, 0.05)]),
+        _cam_dir([(0, 0, -1)]),
+        depth,
+        mask,
+        INTR_BOX,
+        T_DOWN,
+        client,
+        [big],
+        DOWN,
+        CFG,
+    )
     assert _reasons(res) == ["bending"] and res.seal.tolist() == [True]
 
 
@@ -297,19 +433,27 @@ def _lying_cylinder(client, radius: float, length: float):
     a = R cos(pi/64) the polygon's apothem; the COM at height a."""
     floor = _floor(client)
     apothem = radius * np.cos(np.pi / SECTIONS)
-    quat = p.multiplyTransforms([0, 0, 0], p.getQuaternionFromEuler([-np.pi / 2, 0, 0]),
-                                [0, 0, 0], p.getQuaternionFromEuler([0, 0, np.pi / SECTIONS]))[1]
-    body = create_body(client, cylinder(radius, length, SECTIONS), DENSITY, 0.5,
-                       [0.0, 0.0, apothem], quat)
+    quat = p.multiplyTransforms(
+        [0, 0, 0],
+        p.getQuaternionFromEuler([-np.pi / 2, 0, 0]),
+        [0, 0, 0],
+        p.getQuaternionFromEuler([0, 0, np.pi / SECTIONS]),
+    )[1]
+    body = create_body(
+        client, cylinder(radius, length, SECTIONS), DENSITY, 0.5, [0.0, 0.0, apothem], quat
+    )
     return floor, body, apothem
 
 
-@pytest.mark.parametrize("radius, expected", [
-    # Sag across the axis R - sqrt(R^2 - r^2), normal turn asin(r/R) at the rim's sides:
-    (0.040, "ok"),  # 40 - sqrt(1600 - 81) = 1.03 mm <= 3 mm; 13.0 deg <= 45 deg
-    (0.014, "uneven"),  # 14 - sqrt(196 - 81) = 3.28 mm > 3 mm; 40.0 deg <= 45 deg
-    (0.010, "off_face"),  # 10 - sqrt(100 - 81) = 5.64 mm, but first 64.2 deg > 45 deg
-])
+@pytest.mark.parametrize(
+    "radius, expected",
+    [
+        # Sag across the axis R - sqrt(R^2 - r^2), normal turn asin(r/R) at the rim's sides:
+        (0.040, "ok"),  # 40 - sqrt(1600 - 81) = 1.03 mm <= 3 mm; 13.0 deg <= 45 deg
+        (0.014, "uneven"),  # 14 - sqrt(196 - 81) = 3.28 mm > 3 mm; 40.0 deg <= 45 deg
+        (0.010, "off_face"),  # 10 - sqrt(100 - 81) = 5.64 mm, but first 64.2 deg > 45 deg
+    ],
+)
 def test_cup_on_the_top_line_of_a_lying_cylinder(client, radius, expected):
     r = CFG.cup_radius
     sag = radius - np.sqrt(radius**2 - r**2)
@@ -320,8 +464,9 @@ def test_cup_on_the_top_line_of_a_lying_cylinder(client, radius, expected):
     # the rim's sides hit flats turned by 39.4 deg (R = 14 mm), not 40.0 deg, and the sag
     # differs from the circle's by under 0.02 mm.
     point = _cam([(0.0, 0.0, 2 * apothem)])
-    res = evaluate_contacts_mesh(point, _cam_dir([(0, 0, -1)]), depth, mask, INTR_CYL, T_DOWN,
-                                 client, [body], DOWN, CFG)
+    res = evaluate_contacts_mesh(
+        point, _cam_dir([(0, 0, -1)]), depth, mask, INTR_CYL, T_DOWN, client, [body], DOWN, CFG
+    )
     assert _reasons(res) == [expected] and res.instance.tolist() == [1]
     assert res.seal.tolist() == [expected == "ok"]
 
@@ -333,12 +478,12 @@ def test_heavy_cylinder_held_far_from_its_com_bends(client):
     # a: no torsion, bending d W against r f_N = 0.0895 N m:
     # d = 50 mm: 0.138 N m > 0.0895: bending; d = 20 mm: 0.0551 N m: holds.
     floor, body, apothem = _lying_cylinder(client, 0.04, 0.14)
-    assert p.getDynamicsInfo(body, -1, physicsClientId=client)[0] == pytest.approx(0.2810,
-                                                                                   abs=1e-4)
+    assert p.getDynamicsInfo(body, -1, physicsClientId=client)[0] == pytest.approx(0.2810, abs=1e-4)
     depth, mask = _images(client, INTR_CYL, T_DOWN, floor, [body], "tinyrenderer")
     points = _cam([(0.0, d, 2 * apothem) for d in (0.05, 0.02, 0.0)])
-    res = evaluate_contacts_mesh(points, _cam_dir([(0, 0, -1)] * 3), depth, mask, INTR_CYL,
-                                 T_DOWN, client, [body], DOWN, CFG)
+    res = evaluate_contacts_mesh(
+        points, _cam_dir([(0, 0, -1)] * 3), depth, mask, INTR_CYL, T_DOWN, client, [body], DOWN, CFG
+    )
     assert _reasons(res) == ["bending", "ok", "ok"]
     assert res.seal.tolist() == [True, True, True]
 
@@ -362,7 +507,17 @@ def test_end_face_held_off_the_axis_twists(client):
     points = points @ T_cam_world[:3, :3].T + T_cam_world[:3, 3]
     gravity = T_cam_world[:3, :3] @ [0.0, 0.0, -1.0]
     np.testing.assert_allclose(gravity, [0, 1, 0], atol=1e-12)
-    res = evaluate_contacts_mesh(points, np.tile([0.0, 0.0, 1.0], (2, 1)), depth, mask,
-                                 INTR_CYL, T, client, [body], gravity, CFG)
+    res = evaluate_contacts_mesh(
+        points,
+        np.tile([0.0, 0.0, 1.0], (2, 1)),
+        depth,
+        mask,
+        INTR_CYL,
+        T,
+        client,
+        [body],
+        gravity,
+        CFG,
+    )
     assert _reasons(res) == ["torsion", "bending"]
     assert res.seal.tolist() == [True, True]

@@ -14,9 +14,14 @@ import pytest
 
 from pipeline.camera.geometry import Intrinsics, camera_pose_above_bin, pose_matrix
 from pipeline.camera.raycast import BoxShape, raycast_boxes
-from pipeline.controller.heap_model import (HeapCollider, HeapModel, HeapModelConfig,
-                                            agreeing_neighbours,
-                                            build_heightmap, fill_unknown)
+from pipeline.controller.heap_model import (
+    HeapCollider,
+    HeapModel,
+    HeapModelConfig,
+    agreeing_neighbours,
+    build_heightmap,
+    fill_unknown,
+)
 from pipeline.controller.observation import Observation
 from pipeline.controller.planning import Grasp, PlannerError, checked_grasps, load_plugin
 
@@ -24,8 +29,9 @@ REPO = Path(__file__).resolve().parents[1]
 INTR = Intrinsics(416, 416, 411.7, 411.7, 207.5, 207.5)
 HOME = camera_pose_above_bin(0.625)
 BIN = SimpleNamespace(inner_length_x=0.40, inner_width_y=0.30)
-HEAP = HeapModelConfig(cell_m=0.005, bin_tolerance_m=0.004, flying_tolerance_m=0.01,
-                       flying_min_neighbours=4)
+HEAP = HeapModelConfig(
+    cell_m=0.005, bin_tolerance_m=0.004, flying_tolerance_m=0.01, flying_min_neighbours=4
+)
 
 
 def observe(boxes, T=HOME) -> Observation:
@@ -61,10 +67,12 @@ def test_heightmap_of_a_box_by_hand():
     m = build_heightmap(obs, BIN, HEAP)
     assert m.shape == (60, 80)
     centres = m.centres()
-    inside = (np.abs(centres[..., 0] - 0.05) < 0.0725 - 0.005) & \
-        (np.abs(centres[..., 1] + 0.03) < 0.046 - 0.005)
-    outside = (np.abs(centres[..., 0] - 0.05) > 0.0725 + 0.005) | \
-        (np.abs(centres[..., 1] + 0.03) > 0.046 + 0.005)
+    inside = (np.abs(centres[..., 0] - 0.05) < 0.0725 - 0.005) & (
+        np.abs(centres[..., 1] + 0.03) < 0.046 - 0.005
+    )
+    outside = (np.abs(centres[..., 0] - 0.05) > 0.0725 + 0.005) | (
+        np.abs(centres[..., 1] + 0.03) > 0.046 + 0.005
+    )
     np.testing.assert_allclose(m.heights[inside], 0.052, atol=1e-4)
     assert (m.heights[outside] == 0).all()
     assert inside.sum() > 200 and outside.sum() > 3000
@@ -118,8 +126,9 @@ def test_the_grasped_surface_is_left_out():
     """The box's top as the grasped region: its cells fall to the floor (its edge cells too:
     their other points are the floor's), and the cube's stay; half the top (x < 0) as the
     region leaves the other half standing."""
-    obs = observe([((0.0, 0.0, 0.026), (0.145, 0.092, 0.052)),
-                   ((0.12, 0.09, 0.05), (0.06, 0.06, 0.10))])
+    obs = observe(
+        [((0.0, 0.0, 0.026), (0.145, 0.092, 0.052)), ((0.12, 0.09, 0.05), (0.06, 0.06, 0.10))]
+    )
     model = HeapModel(BIN, HEAP)
     m = model.update(obs)
     top = np.abs(obs.depth_m - (0.625 - 0.052)) < 1e-4
@@ -158,12 +167,12 @@ def test_surface_points_of_the_primitives_by_hand():
     rim more than 5 mm apart."""
     import pybullet as p
 
-    from pipeline.controller.heap_model import _surface_points
+    from pipeline.controller.heap_model import surface_points
 
-    box = _surface_points(p.GEOM_BOX, [0.02, 0.01, 0.01], 0.005)
+    box = surface_points(p.GEOM_BOX, [0.02, 0.01, 0.01], 0.005)
     assert len(box) == 5 * 3 * 3 - 3  # 45 lattice points, the 3 inner ones (x = −5, 0, 5 mm) off
     assert np.all(np.isclose(np.abs(box), [0.01, 0.005, 0.005]).any(axis=1))
-    cyl = _surface_points(p.GEOM_CYLINDER, [0.025, 0.009], 0.005)
+    cyl = surface_points(p.GEOM_CYLINDER, [0.025, 0.009], 0.005)
     r = np.hypot(cyl[:, 0], cyl[:, 1])
     assert np.all(np.isclose(r, 0.009) | np.isclose(np.abs(cyl[:, 2]), 0.0125))
     assert r.max() <= 0.009 + 1e-12
@@ -176,10 +185,16 @@ def test_surface_points_of_the_primitives_by_hand():
 def _memory(**kw):
     from pipeline.controller.retry import RetryMemory
 
-    ev = SimpleNamespace(retry_policy="skip_failed", retry_same_point_m=0.03,
-                         retry_neighbour_m=0.15, retry_depth_change_m=0.005,
-                         retry_changed_area_m2=0.0005, retry_point_outcomes=["no_seal"],
-                         retry_drop_single_cup=True, retry_no_seal_two_cups=True)
+    ev = SimpleNamespace(
+        retry_policy="skip_failed",
+        retry_same_point_m=0.03,
+        retry_neighbour_m=0.15,
+        retry_depth_change_m=0.005,
+        retry_changed_area_m2=0.0005,
+        retry_point_outcomes=["no_seal"],
+        retry_drop_single_cup=True,
+        retry_no_seal_two_cups=True,
+    )
     return RetryMemory(SimpleNamespace(**{**vars(ev), **kw}))
 
 
@@ -282,9 +297,9 @@ def test_the_robot_decides_from_observations_with_no_world():
     centre; no module of the simulated world was ever imported."""
     script = f"""
 import sys, numpy as np
-sys.path.insert(0, {str(REPO / 'tests')!r})
+sys.path.insert(0, {str(REPO / "tests")!r})
 from test_controller import observe, INTR
-from pipeline.cli import compose
+from pipeline.runtime.cli import compose
 from pipeline.controller.picker import RobotController
 from pipeline.controller.planning import Grasp
 from pipeline.camera.geometry import project, world_to_camera
@@ -307,8 +322,9 @@ leaked = sorted(m for m in sys.modules if m.startswith(("pipeline.world", "pipel
                 "pipeline.dataset", "pipeline.camera.sensor", "pipeline.labelling.scene")))
 print("LEAKED", leaked)
 """
-    out = subprocess.run([sys.executable, "-c", script], cwd=REPO, capture_output=True,
-                         text=True, timeout=300)
+    out = subprocess.run(
+        [sys.executable, "-c", script], cwd=REPO, capture_output=True, text=True, timeout=300
+    )
     assert out.returncode == 0, out.stderr[-3000:]
     lines = {line.split()[0]: line for line in out.stdout.splitlines() if line[:1].isupper()}
     assert lines["PATTERN"].startswith("PATTERN B POINT [0.0, 0.0, 0.052]")
@@ -322,12 +338,14 @@ def test_bad_planner_answers_are_named():
     good = [Grasp(10.0, 20.0, "B"), Grasp(3.0, 4.0, None, point_cam=np.array([0, 0, 0.5]))]
     assert checked_grasps(good, obs, "p") == good
     assert checked_grasps((), obs, "p") == []
-    for bad, words in [(None, "NoneType, not a sequence"),
-                       ([(10, 20)], "item 0 of plan()'s answer is a tuple, not a Grasp"),
-                       ([Grasp(500.0, 20.0, "B")], "lies outside the 416 x 416 image"),
-                       ([Grasp(float("nan"), 20.0, "B")], "non-finite pixel"),
-                       ([Grasp(10.0, 20.0, "X")], "pattern 'X'"),
-                       ([Grasp(1.0, 2.0, None, point_cam=np.array([0, 0, -1.0]))], "point_cam")]:
+    for bad, words in [
+        (None, "NoneType, not a sequence"),
+        ([(10, 20)], "item 0 of plan()'s answer is a tuple, not a Grasp"),
+        ([Grasp(500.0, 20.0, "B")], "lies outside the 416 x 416 image"),
+        ([Grasp(float("nan"), 20.0, "B")], "non-finite pixel"),
+        ([Grasp(10.0, 20.0, "X")], "pattern 'X'"),
+        ([Grasp(1.0, 2.0, None, point_cam=np.array([0, 0, -1.0]))], "point_cam"),
+    ]:
         with pytest.raises(PlannerError, match=words.replace("(", r"\(").replace(")", r"\)")):
             checked_grasps(bad, obs, "p")
 
@@ -338,15 +356,18 @@ def test_bad_plugins_are_named(tmp_path, monkeypatch):
         "class WrongArgs:\n    def __init__(self, cfg): pass\n    def plan(self, obs): return []\n"
         "class Broken:\n    def __init__(self, cfg): raise RuntimeError('no model file')\n"
         "class Good:\n    def __init__(self, cfg): self.cfg = cfg\n"
-        "    def plan(self, observation, rng): return []\n")
+        "    def plan(self, observation, rng): return []\n"
+    )
     monkeypatch.syspath_prepend(str(tmp_path))
     assert load_plugin("my_planners:Good", "cfg").cfg == "cfg"
-    cases = [("no_such_module:P", "cannot import module 'no_such_module'"),
-             ("my_planners:Missing", "has no 'Missing'"),
-             ("my_planners:NoPlan", "has no plan\\(\\) method"),
-             ("my_planners:WrongArgs", "does not take \\(observation, rng\\)"),
-             ("my_planners:Broken", "failed \\(RuntimeError: no model file\\)"),
-             ("nothing_registered", "unknown planner 'nothing_registered'")]
+    cases = [
+        ("no_such_module:P", "cannot import module 'no_such_module'"),
+        ("my_planners:Missing", "has no 'Missing'"),
+        ("my_planners:NoPlan", "has no plan\\(\\) method"),
+        ("my_planners:WrongArgs", "does not take \\(observation, rng\\)"),
+        ("my_planners:Broken", "failed \\(RuntimeError: no model file\\)"),
+        ("nothing_registered", "unknown planner 'nothing_registered'"),
+    ]
     for name, words in cases:
         with pytest.raises(PlannerError, match=words):
             load_plugin(name, "cfg")
@@ -356,16 +377,19 @@ def test_the_example_plugin_proposes_box_tops_highest_first():
     """docs/examples/centroid_planner.py on a medium box (top at 52 mm) and a tall cube (top at
     140 mm): the cube's top first, with one cup (60 mm < 2 x 44 mm), then the box's top with
     both (92 mm ≥ 88 mm), each at its centre; nothing on the floor."""
-    from pipeline.cli import compose
+    from pipeline.runtime.cli import compose
 
     sys.path.insert(0, str(REPO))
     try:
-        planner = load_plugin("docs.examples.centroid_planner:CentroidPlanner",
-                              compose("evaluate", ["experiment=smoke"]))
+        planner = load_plugin(
+            "docs.examples.centroid_planner:CentroidPlanner",
+            compose("evaluate", ["experiment=smoke"]),
+        )
     finally:
         sys.path.remove(str(REPO))
-    obs = observe([((0.0, 0.0, 0.026), (0.145, 0.092, 0.052)),
-                   ((-0.14, 0.08, 0.07), (0.06, 0.06, 0.14))])
+    obs = observe(
+        [((0.0, 0.0, 0.026), (0.145, 0.092, 0.052)), ((-0.14, 0.08, 0.07), (0.06, 0.06, 0.14))]
+    )
     grasps = checked_grasps(planner.plan(obs, np.random.default_rng(0)), obs, "centroid")
     assert [g.pattern for g in grasps] == ["L", "B"]
     assert [round(g.score, 3) for g in grasps] == [0.14, 0.052]

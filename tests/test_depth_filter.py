@@ -25,17 +25,24 @@ def filter_cfg(name: str):
     return OmegaConf.load(CONF_FILTER / f"{name}.yaml")
 
 
-def band_hole(width_px: int, left: float = 0.6, right: float = 0.6, rows: int = 5,
-              start: int = 3, cols: int = 20) -> np.ndarray:
+def band_hole(
+    width_px: int,
+    left: float = 0.6,
+    right: float = 0.6,
+    rows: int = 5,
+    start: int = 3,
+    cols: int = 20,
+) -> np.ndarray:
     """``rows`` × ``cols`` image: ``left`` depth, then a hole ``width_px`` columns wide from
     column ``start`` across every row, then ``right`` depth."""
     z = np.full((rows, cols), left, np.float32)
-    z[:, start + width_px:] = right
-    z[:, start:start + width_px] = 0.0
+    z[:, start + width_px :] = right
+    z[:, start : start + width_px] = 0.0
     return z
 
 
 # --- fill_holes ------------------------------------------------------------------------------
+
 
 def test_single_pixel_hole_in_a_flat_image():
     z = np.full((5, 5), 0.6, np.float32)
@@ -71,10 +78,12 @@ def test_wide_hole_between_near_and_far_fills_from_the_far_side():
     # 5 passes close it, all at the far depth.
     assert (fill_holes(z, 5)[:, 3:8] == np.float32(0.7)).all()
     # A 2-px hole: pass 1 fills column 4 from the right, pass 2 column 3.
-    np.testing.assert_array_equal(fill_holes(band_hole(2, left=0.5, right=0.7), 1)[0, 3:5],
-                                  np.array([0, 0.7], np.float32))
-    np.testing.assert_array_equal(fill_holes(band_hole(2, left=0.5, right=0.7), 2)[0, 3:5],
-                                  np.array([0.7, 0.7], np.float32))
+    np.testing.assert_array_equal(
+        fill_holes(band_hole(2, left=0.5, right=0.7), 1)[0, 3:5], np.array([0, 0.7], np.float32)
+    )
+    np.testing.assert_array_equal(
+        fill_holes(band_hole(2, left=0.5, right=0.7), 2)[0, 3:5], np.array([0.7, 0.7], np.float32)
+    )
 
 
 def test_projector_shadow_band_is_filled_from_the_far_side():
@@ -89,8 +98,7 @@ def test_projector_shadow_band_is_filled_from_the_far_side():
     assert (fill_holes(z, 5)[:, 3:8] == np.float32(0.7)).all()
 
 
-@pytest.mark.parametrize("width, passes", [(1, 1), (2, 1), (3, 2), (4, 2), (7, 4), (8, 4),
-                                           (9, 5)])
+@pytest.mark.parametrize("width, passes", [(1, 1), (2, 1), (3, 2), (4, 2), (7, 4), (8, 4), (9, 5)])
 def test_passes_needed_to_close_a_hole(width, passes):
     # A hole spanning every row, bounded on both sides: each pass closes one column from each
     # side, so a k-px hole needs ceil(k / 2) passes; one pass fewer leaves the middle
@@ -102,7 +110,7 @@ def test_passes_needed_to_close_a_hole(width, passes):
     assert (left == 0).sum(axis=1).tolist() == [width - 2 * (passes - 1)] * z.shape[0]
     # The remaining hole is the middle of the band.
     first = 3 + passes - 1
-    assert (left[:, first:first + width - 2 * (passes - 1)] == 0).all()
+    assert (left[:, first : first + width - 2 * (passes - 1)] == 0).all()
 
 
 def test_four_passes_close_eight_pixels_but_not_nine():
@@ -145,6 +153,7 @@ def test_fill_leaves_data_alone_and_empty_images_empty():
 
 
 # --- median_filter ---------------------------------------------------------------------------
+
 
 @pytest.mark.parametrize("ksize", [3, 5])
 def test_median_removes_a_spike_and_keeps_a_step(ksize):
@@ -199,6 +208,7 @@ def test_median_size_other_than_3_or_5_raises(ksize):
 
 
 # --- preprocess_depth ------------------------------------------------------------------------
+
 
 def test_preprocess_off_returns_the_input_itself():
     z = band_hole(3)

@@ -11,8 +11,8 @@ import math
 
 import numpy as np
 import pytest
-
 from conftest import default_config
+
 import pipeline.dexnet.cem as cem_mod
 from pipeline.camera.geometry import Intrinsics
 from pipeline.dexnet.cem import CEMConfig, cross_entropy_method
@@ -70,8 +70,14 @@ def test_default_sizes(cloud, components):
 def test_changed_parameters(cloud, components):
     # 40 seeds -> ceil(0.5 * 40) = 20 elites, ceil(0.1 * 20) = 2 components -> 15 samples
     # -> ceil(0.5 * 15) = 8 elites, ceil(0.1 * 8) = 1 component -> 15 -> final 15.
-    cfg = dataclasses.replace(CEM, num_seed_samples=40, num_gmm_samples=15, num_iters=2,
-                              gmm_refit_p=0.5, gmm_component_frac=0.1)
+    cfg = dataclasses.replace(
+        CEM,
+        num_seed_samples=40,
+        num_gmm_samples=15,
+        num_iters=2,
+        gmm_refit_p=0.5,
+        gmm_component_frac=0.1,
+    )
     res = cross_entropy_method(cloud, peak, cfg, SAMPLER, np.random.default_rng(1))
     assert [len(it.candidates) for it in res.iterations] == [40, 15, 15]
     assert [len(it.elite_idx) for it in res.iterations] == [20, 8, 1]
@@ -80,8 +86,9 @@ def test_changed_parameters(cloud, components):
 
 
 def test_zero_iterations_returns_argmax_of_seeds(cloud, components):
-    res = cross_entropy_method(cloud, peak, dataclasses.replace(CEM, num_iters=0), SAMPLER,
-                               np.random.default_rng(2))
+    res = cross_entropy_method(
+        cloud, peak, dataclasses.replace(CEM, num_iters=0), SAMPLER, np.random.default_rng(2)
+    )
     assert [len(it.candidates) for it in res.iterations] == [200]
     assert components == []
     assert res.best_score == res.iterations[0].scores.max()
@@ -89,8 +96,14 @@ def test_zero_iterations_returns_argmax_of_seeds(cloud, components):
 
 def test_components_never_exceed_elites(cloud, components):
     # frac 1.0 with 3 elites -> 3 components (not more than the 3 points).
-    cfg = dataclasses.replace(CEM, num_seed_samples=10, num_gmm_samples=10, num_iters=1,
-                              gmm_refit_p=0.25, gmm_component_frac=1.0)
+    cfg = dataclasses.replace(
+        CEM,
+        num_seed_samples=10,
+        num_gmm_samples=10,
+        num_iters=1,
+        gmm_refit_p=0.25,
+        gmm_component_frac=1.0,
+    )
     res = cross_entropy_method(cloud, peak, cfg, SAMPLER, np.random.default_rng(3))
     assert components == [(3, 3)]
     assert [len(it.candidates) for it in res.iterations] == [10, 10]
@@ -98,8 +111,7 @@ def test_components_never_exceed_elites(cloud, components):
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_best_lands_near_the_peak(cloud, seed):
-    res = cross_entropy_method(cloud, peak, CEM, SAMPLER,
-                               np.random.default_rng(seed))
+    res = cross_entropy_method(cloud, peak, CEM, SAMPLER, np.random.default_rng(seed))
     # Dex-Net returns the argmax of the *final* set of 50, so "a few pixels", not exactly 0
     # (over 60 seeds: median 2 px, worst 4.5 px) ...
     assert np.linalg.norm(res.best.uv[0] - TARGET) <= 5.0
@@ -128,9 +140,13 @@ def test_deterministic_for_same_seed(cloud):
 
 def test_ties_broken_by_order_and_nan_is_worst(cloud):
     # Constant scores: elites are the first ceil(0.25 N) candidates (stable sort).
-    res = cross_entropy_method(cloud, lambda c: np.zeros(len(c)),
-                               dataclasses.replace(CEM, num_iters=1), SAMPLER,
-                               np.random.default_rng(4))
+    res = cross_entropy_method(
+        cloud,
+        lambda c: np.zeros(len(c)),
+        dataclasses.replace(CEM, num_iters=1),
+        SAMPLER,
+        np.random.default_rng(4),
+    )
     np.testing.assert_array_equal(res.iterations[0].elite_idx, np.arange(50))
 
     def nan_but_peak(c):
@@ -138,19 +154,20 @@ def test_ties_broken_by_order_and_nan_is_worst(cloud):
         s[::2] = np.nan
         return s
 
-    res = cross_entropy_method(cloud, nan_but_peak, CEM, SAMPLER,
-                               np.random.default_rng(5))
+    res = cross_entropy_method(cloud, nan_but_peak, CEM, SAMPLER, np.random.default_rng(5))
     assert np.isfinite(res.best_score)
     for it in res.iterations:
         assert np.all(np.isfinite(it.scores[it.elite_idx]))
 
 
 def test_empty_valid_mask_gives_empty_result():
-    empty = point_cloud_image(np.full((200, 200), 0.5), INTR, SAMPLER,
-                              object_mask=np.zeros((200, 200), bool))
+    empty = point_cloud_image(
+        np.full((200, 200), 0.5), INTR, SAMPLER, object_mask=np.zeros((200, 200), bool)
+    )
     calls = []
-    res = cross_entropy_method(empty, lambda c: calls.append(len(c)) or peak(c), CEM,
-                               SAMPLER, np.random.default_rng(6))
+    res = cross_entropy_method(
+        empty, lambda c: calls.append(len(c)) or peak(c), CEM, SAMPLER, np.random.default_rng(6)
+    )
     assert len(res.best) == 0 and res.best_score == -math.inf
     assert res.iterations == [] and res.num_scored == 0 and calls == []
 
@@ -161,15 +178,13 @@ def test_tiny_region_and_duplicate_elites(cloud):
     mask = np.zeros((200, 200), bool)
     mask[100:102, 100:102] = True
     small = point_cloud_image(np.full((200, 200), 0.5), INTR, SAMPLER, object_mask=mask)
-    res = cross_entropy_method(small, peak, CEM, SAMPLER,
-                               np.random.default_rng(7))
+    res = cross_entropy_method(small, peak, CEM, SAMPLER, np.random.default_rng(7))
     assert len(res.iterations[0].candidates) == 4
     for it in res.iterations:
         assert mask[it.candidates.uv[:, 1], it.candidates.uv[:, 0]].all()
-    assert tuple(res.best.uv[0]) == (101, 100)     # nearest of the 4 pixels to (120, 80)
+    assert tuple(res.best.uv[0]) == (101, 100)  # nearest of the 4 pixels to (120, 80)
 
 
 def test_score_fn_shape_is_checked(cloud):
     with pytest.raises(ValueError):
-        cross_entropy_method(cloud, lambda c: np.zeros(3), CEM, SAMPLER,
-                             np.random.default_rng(8))
+        cross_entropy_method(cloud, lambda c: np.zeros(3), CEM, SAMPLER, np.random.default_rng(8))

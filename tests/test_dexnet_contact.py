@@ -18,12 +18,11 @@ from types import SimpleNamespace as NS
 
 import numpy as np
 import pytest
-
 from conftest import default_config
+
 from pipeline.camera.geometry import Intrinsics
-from pipeline.dexnet.contact import (
-    REASONS, SuctionModelConfig, evaluate_contacts, robust_quality,
-)
+from pipeline.dexnet.contact import REASONS, evaluate_contacts, robust_quality
+from pipeline.grasping.suction import SuctionModelConfig
 
 INTR = Intrinsics(120, 120, 150.0, 150.0, 59.5, 59.5)
 CFG = default_config(SuctionModelConfig)
@@ -90,10 +89,13 @@ def test_centre_of_large_flat_face_seals_and_holds():
         assert field.shape == (1,)
 
 
-@pytest.mark.parametrize("point, case", [
-    ((0.0705, 0.0, TOP), "2 mm inside the +x edge: the rim reaches x = 79.5 mm > 72.5 mm"),
-    ((0.0705, 0.044, TOP), "2 mm inside the corner in x and y"),
-])
+@pytest.mark.parametrize(
+    "point, case",
+    [
+        ((0.0705, 0.0, TOP), "2 mm inside the +x edge: the rim reaches x = 79.5 mm > 72.5 mm"),
+        ((0.0705, 0.044, TOP), "2 mm inside the corner in x and y"),
+    ],
+)
 def test_edges_and_corners_do_not_seal(point, case):
     res = _evaluate([_on_floor(BIG)], point)
     assert res.seal.tolist() == [False] and res.wrench_ok.tolist() == [False], case
@@ -117,10 +119,13 @@ def test_bin_floor_is_not_on_a_box():
     assert _reasons(empty) == ["not_on_box"]
 
 
-@pytest.mark.parametrize("tilt_deg, expected", [
-    (5.0, "ok"),  # spread 2 r tan 5 deg = 1.57 mm <= 3 mm
-    (30.0, "uneven"),  # spread 2 r tan 30 deg = 10.39 mm > 3 mm
-])
+@pytest.mark.parametrize(
+    "tilt_deg, expected",
+    [
+        (5.0, "ok"),  # spread 2 r tan 5 deg = 1.57 mm <= 3 mm
+        (30.0, "uneven"),  # spread 2 r tan 30 deg = 10.39 mm > 3 mm
+    ],
+)
 def test_tilted_approach_on_a_level_face(tilt_deg, expected):
     t = np.radians(tilt_deg)
     axis = [np.sin(t), 0.0, np.cos(t)]
@@ -184,19 +189,34 @@ def test_side_face_shear_and_torsion():
     # Density 2000: m = 0.24 kg, F = (0, 2.354, 0) N; shear 2.354 <= 6.35 N. Grasped 80 mm off
     # centre along x: tau = (-0.08, 0, 0.005) x F = (-0.0118, 0, -0.1883) N m;
     # torsion |tau . a| = 0.1883 > r mu f_N = 0.05715 N m.
-    res = _evaluate([plate], [0.08, 0.0, TOP], gravity=SIDEWAYS, background_z=1.0,
-                    cfg=replace(CFG, density=2000.0))
+    res = _evaluate(
+        [plate],
+        [0.08, 0.0, TOP],
+        gravity=SIDEWAYS,
+        background_z=1.0,
+        cfg=replace(CFG, density=2000.0),
+    )
     assert _reasons(res) == ["torsion"]
     # Density 6000, at the centre: F = 7.063 N across the axis > mu f_N = 6.35 N.
-    res = _evaluate([plate], [0.0, 0.0, TOP], gravity=SIDEWAYS, background_z=1.0,
-                    cfg=replace(CFG, density=6000.0))
+    res = _evaluate(
+        [plate],
+        [0.0, 0.0, TOP],
+        gravity=SIDEWAYS,
+        background_z=1.0,
+        cfg=replace(CFG, density=6000.0),
+    )
     assert _reasons(res) == ["shear"]
 
 
 def test_wrench_ok_implies_seal_on_a_batch():
     boxes = [_on_floor(BIG), _box((0.03, 0.03, 0.004), (0.020, 0.0, TOP - 0.002))]
-    points = [[0.0, 0.0, TOP], [0.0705, 0.0, TOP], [0.12, 0.0, FLOOR], [-0.03, 0.0, TOP],
-              [0.020, 0.0, TOP - 0.004]]
+    points = [
+        [0.0, 0.0, TOP],
+        [0.0705, 0.0, TOP],
+        [0.12, 0.0, FLOOR],
+        [-0.03, 0.0, TOP],
+        [0.020, 0.0, TOP - 0.004],
+    ]
     res = _evaluate(boxes, points)
     assert _reasons(res) == ["occluded", "off_face", "not_on_box", "ok", "ok"]
     assert res.instance.tolist() == [1, 1, 0, 1, 2]
@@ -213,12 +233,14 @@ def test_robust_quality():
     axes = np.tile(Z_AXIS, (3, 1))
 
     def quality(seed: int) -> np.ndarray:
-        return robust_quality(points, axes, depth, mask, INTR, boxes, DOWN, CFG,
-                              np.random.default_rng(seed))
+        return robust_quality(
+            points, axes, depth, mask, INTR, boxes, DOWN, CFG, np.random.default_rng(seed)
+        )
 
     q = quality(0)
     assert q.shape == (3,) and np.all((q >= 0.0) & (q <= 1.0))
     assert q[0] >= 0.8 and q[1] <= 0.1 and q[2] == 0.0
     np.testing.assert_array_equal(q, quality(0))
-    assert robust_quality(points[:0], axes[:0], depth, mask, INTR, boxes, DOWN, CFG,
-                          np.random.default_rng(0)).shape == (0,)
+    assert robust_quality(
+        points[:0], axes[:0], depth, mask, INTR, boxes, DOWN, CFG, np.random.default_rng(0)
+    ).shape == (0,)

@@ -2,8 +2,8 @@
 
 import numpy as np
 import torch
-
 from conftest import default_config
+
 from pipeline.dexnet.gqcnn import GQCNN, CropConfig, GQCNNConfig, border_for_window, extract_crops
 
 CFG = default_config(CropConfig, window_px=96, size=48, depth_scale=0.05, missing_value=1.0)  # 2:1
@@ -16,8 +16,9 @@ def _flat(h=200, w=200, z=0.5):
 def test_crop_is_centred_on_the_candidate_and_of_the_right_size():
     depth = _flat()
     depth[80, 120] = 0.45  # a 5-cm bump at (u, v) = (120, 80)
-    crops = extract_crops(depth, np.array([[120, 80]]), np.array([0.45]),
-                          np.array([[0.0, 0.0, 1.0]]), CFG)
+    crops = extract_crops(
+        depth, np.array([[120, 80]]), np.array([0.45]), np.array([[0.0, 0.0, 1.0]]), CFG
+    )
     assert crops.shape == (1, 1, 48, 48) and crops.dtype == np.float32
     # 96 px → 48 px: the candidate is crop pixel (24, 24), relative height 0.
     assert crops[0, 0, 24, 24] == 0.0
@@ -39,8 +40,9 @@ def test_crop_rotates_the_approach_axis_onto_plus_u():
 def test_missing_depth_and_the_outside_read_the_missing_value():
     depth = _flat()
     depth[:, :10] = 0.0  # a column of holes at the left border
-    crops = extract_crops(depth, np.array([[5, 100]]), np.array([0.5]),
-                          np.array([[0.0, 0.0, 1.0]]), CFG)
+    crops = extract_crops(
+        depth, np.array([[5, 100]]), np.array([0.5]), np.array([[0.0, 0.0, 1.0]]), CFG
+    )
     # Left half of the crop: holes (u < 10) and outside the image (u < 0): missing value 1.0.
     assert np.all(crops[0, 0, :, :20] == 1.0)
     # Right of the holes: the plane at the candidate depth → 0.

@@ -11,12 +11,16 @@ import dataclasses
 
 import numpy as np
 import pytest
-
 from conftest import default_config
+
 from pipeline.camera.geometry import Intrinsics
 from pipeline.dexnet.quality import PlanarityConfig, disc_planarity
 from pipeline.dexnet.sampling import (
-    Candidates, SamplerConfig, candidates_at, point_cloud_image, sample_candidates,
+    Candidates,
+    SamplerConfig,
+    candidates_at,
+    point_cloud_image,
+    sample_candidates,
 )
 
 INTR = Intrinsics(200, 200, 200.0, 200.0, 99.5, 99.5)
@@ -50,8 +54,9 @@ def test_level_plane_normals_axis_angle():
     # window leaves the image).
     assert cloud.valid[1:-1, 1:-1].all()
     assert not cloud.valid[0].any() and not cloud.valid[:, -1].any()
-    np.testing.assert_allclose(cloud.normals[1:-1, 1:-1],
-                               np.broadcast_to([0, 0, -1.0], (198, 198, 3)), atol=1e-12)
+    np.testing.assert_allclose(
+        cloud.normals[1:-1, 1:-1], np.broadcast_to([0, 0, -1.0], (198, 198, 3)), atol=1e-12
+    )
     # Pixel (u, v) = (100, 100) is half a pixel right/below the axis: x = y = 0.5 / 200 * 0.5.
     np.testing.assert_allclose(cloud.points[100, 100], [0.00125, 0.00125, 0.5])
     cands = sample_candidates(cloud, 50, np.random.default_rng(0), SAMPLER)
@@ -75,11 +80,15 @@ def test_tilted_plane_20_degrees():
 
 def test_tilted_plane_40_degrees_gives_nothing():
     cloud = point_cloud_image(tilted_plane(40.0), INTR, SAMPLER)
-    assert cloud.valid[1:-1, 1:-1].all()               # valid, but too steep for suction
+    assert cloud.valid[1:-1, 1:-1].all()  # valid, but too steep for suction
     assert len(sample_candidates(cloud, 50, np.random.default_rng(2), SAMPLER)) == 0
     # ...unless the limit is raised past 40 degrees.
-    cands = sample_candidates(cloud, 10, np.random.default_rng(2),
-                              dataclasses.replace(SAMPLER, max_approach_angle_deg=45.0))
+    cands = sample_candidates(
+        cloud,
+        10,
+        np.random.default_rng(2),
+        dataclasses.replace(SAMPLER, max_approach_angle_deg=45.0),
+    )
     assert len(cands) == 10
     np.testing.assert_allclose(np.rad2deg(cands.angle), 40.0, atol=0.5)
 
@@ -95,13 +104,13 @@ def test_sampled_pixels_respect_border_and_validity(border):
     assert u.min() >= border and v.min() >= border
     assert u.max() <= 199 - border and v.max() <= 199 - border
     assert cloud.valid[v, u].all()
-    assert len(np.unique(cands.uv, axis=0)) == 500    # drawn without replacement, as gqcnn
+    assert len(np.unique(cands.uv, axis=0)) == 500  # drawn without replacement, as gqcnn
 
 
 def test_holes_and_their_rim_never_sampled():
     d = level_plane()
-    d[90:110, 90:110] = 0.0                              # a 20 x 20 px hole in the middle
-    d[120, 70] = np.nan                                  # non-finite depth also counts as no data
+    d[90:110, 90:110] = 0.0  # a 20 x 20 px hole in the middle
+    d[120, 70] = np.nan  # non-finite depth also counts as no data
     cloud = point_cloud_image(d, INTR, SAMPLER)
     # Pixels whose 3x3 Sobel window touches the hole are invalid: rows/cols 89..110.
     assert not cloud.valid[89:111, 89:111].any()
@@ -109,8 +118,9 @@ def test_holes_and_their_rim_never_sampled():
     assert not cloud.valid[119:122, 69:72].any()
     np.testing.assert_array_equal(cloud.points[95, 95], 0.0)
     np.testing.assert_array_equal(cloud.normals[95, 95], 0.0)
-    cands = sample_candidates(cloud, 2000, np.random.default_rng(4),
-                              dataclasses.replace(SAMPLER, border_px=0))
+    cands = sample_candidates(
+        cloud, 2000, np.random.default_rng(4), dataclasses.replace(SAMPLER, border_px=0)
+    )
     u, v = cands.uv[:, 0], cands.uv[:, 1]
     assert len(cands) == 2000
     assert np.all(d[v, u] > 0)
@@ -130,8 +140,9 @@ def test_step_edge_pixels_rejected_by_the_angle_limit():
     np.testing.assert_allclose(cands.depth, [0.5, 0.5, 0.48, 0.48])
     tilt = np.rad2deg(np.arccos(-cloud.normals[100, 99:101, 2]))
     assert np.all(tilt > 70)
-    samples = sample_candidates(cloud, 2000, np.random.default_rng(5),
-                                dataclasses.replace(SAMPLER, border_px=0))
+    samples = sample_candidates(
+        cloud, 2000, np.random.default_rng(5), dataclasses.replace(SAMPLER, border_px=0)
+    )
     assert len(samples) == 2000
     assert not np.isin(samples.uv[:, 0], [99, 100]).any()
 
@@ -147,25 +158,27 @@ def test_low_step_passes_the_angle_limit_like_dexnet():
 
 def test_candidates_at_ok_flags():
     d = tilted_plane(0.0)
-    d[110:140, 140:199] = tilted_plane(40.0)[110:140, 140:199]   # a steep patch
-    d[70, 80] = 0.0                                                 # a one-pixel hole
+    d[110:140, 140:199] = tilted_plane(40.0)[110:140, 140:199]  # a steep patch
+    d[70, 80] = 0.0  # a one-pixel hole
     mask = np.ones((200, 200), bool)
     mask[120, 100] = False
     cfg = dataclasses.replace(SAMPLER, border_px=20)
     cloud = point_cloud_image(d, INTR, cfg, object_mask=mask)
-    uv = np.array([
-        [100, 100],   # fine
-        [-1, 100],    # outside the image
-        [100, 200],   # outside the image
-        [19, 100],    # in the border (u < 20)
-        [20, 100],    # exactly on the border distance: accepted
-        [179, 100],   # 199 - 179 = 20: accepted
-        [180, 100],   # 199 - 180 = 19: in the border
-        [80, 70],     # the hole
-        [81, 71],     # Sobel window touches the hole -> invalid
-        [160, 120],   # steep patch (40 deg)
-        [100, 120],   # outside the object mask
-    ])
+    uv = np.array(
+        [
+            [100, 100],  # fine
+            [-1, 100],  # outside the image
+            [100, 200],  # outside the image
+            [19, 100],  # in the border (u < 20)
+            [20, 100],  # exactly on the border distance: accepted
+            [179, 100],  # 199 - 179 = 20: accepted
+            [180, 100],  # 199 - 180 = 19: in the border
+            [80, 70],  # the hole
+            [81, 71],  # Sobel window touches the hole -> invalid
+            [160, 120],  # steep patch (40 deg)
+            [100, 120],  # outside the object mask
+        ]
+    )
     cands, ok = candidates_at(cloud, uv, cfg)
     np.testing.assert_array_equal(ok, [1, 0, 0, 0, 1, 1, 0, 0, 0, 0, 0])
     np.testing.assert_array_equal(cands.uv, uv[ok])
@@ -179,11 +192,11 @@ def test_candidates_at_ok_flags():
 
 def test_object_mask_restricts_sampling_and_few_valid_pixels_give_fewer():
     mask = np.zeros((200, 200), bool)
-    mask[100:103, 90:93] = True                          # 9 pixels
+    mask[100:103, 90:93] = True  # 9 pixels
     cloud = point_cloud_image(level_plane(), INTR, SAMPLER, object_mask=mask)
     assert cloud.valid.sum() == 9
     cands = sample_candidates(cloud, 50, np.random.default_rng(6), SAMPLER)
-    assert len(cands) == 9                               # fewer than asked: tries run out
+    assert len(cands) == 9  # fewer than asked: tries run out
     assert mask[cands.uv[:, 1], cands.uv[:, 0]].all()
     empty = point_cloud_image(level_plane(), INTR, SAMPLER, object_mask=np.zeros((200, 200), bool))
     assert len(sample_candidates(empty, 50, np.random.default_rng(6), SAMPLER)) == 0
@@ -193,8 +206,9 @@ def test_max_tries_caps_the_draws():
     # With border 68 only 64 x 64 of the 198 x 198 valid pixels are acceptable (~10 %): 20 tries
     # accept ~2, never more than 20.
     cloud = point_cloud_image(level_plane(), INTR, SAMPLER)
-    cands = sample_candidates(cloud, 50, np.random.default_rng(7),
-                              dataclasses.replace(SAMPLER, max_tries=20))
+    cands = sample_candidates(
+        cloud, 50, np.random.default_rng(7), dataclasses.replace(SAMPLER, max_tries=20)
+    )
     assert len(cands) <= 20 and len(cands) < 50
 
 
@@ -218,14 +232,20 @@ def test_candidates_take_concat_empty():
 
 # ---------------------------------------------------------------------------------- planarity
 
+
 def _cand(cloud, u, v, axis=(0.0, 0.0, 1.0)):
     """A hand-built candidate at pixel (u, v) with the given axis (even where the pixel itself is
     a hole: its point is then the level plane's point, z = 0.5)."""
     z = Z0
     p = [(u - INTR.cx) / INTR.fx * z, (v - INTR.cy) / INTR.fy * z, z]
     a = np.asarray(axis, float)
-    return Candidates(uv=np.array([[u, v]]), point=np.array([p]), axis=a[None] / np.linalg.norm(a),
-                      depth=np.array([z]), angle=np.array([np.arccos(a[2] / np.linalg.norm(a))]))
+    return Candidates(
+        uv=np.array([[u, v]]),
+        point=np.array([p]),
+        axis=a[None] / np.linalg.norm(a),
+        depth=np.array([z]),
+        angle=np.array([np.arccos(a[2] / np.linalg.norm(a))]),
+    )
 
 
 def test_disc_planarity_flat_and_tilted_planes():
@@ -242,12 +262,15 @@ def test_disc_planarity_step_edge():
     # the upper surface at u = 100: its points there lie 7.45 mm to the side (< 9 mm) and 20 mm
     # above the approach plane -> mean squared residual >> sigma^2 = 1 mm^2 -> q ~ exp(-80).
     cloud = point_cloud_image(step(0.02), INTR, SAMPLER)
-    cands, ok = candidates_at(cloud, np.array([[97, 100], [102, 100], [60, 100], [140, 100]]),
-                              dataclasses.replace(SAMPLER, border_px=0))
+    cands, ok = candidates_at(
+        cloud,
+        np.array([[97, 100], [102, 100], [60, 100], [140, 100]]),
+        dataclasses.replace(SAMPLER, border_px=0),
+    )
     assert ok.all()
     q = disc_planarity(cloud, cands, PLANARITY)
     assert q[0] < 0.1 and q[1] < 0.1
-    np.testing.assert_allclose(q[2:], 1.0, atol=1e-6)   # far from the edge: flat
+    np.testing.assert_allclose(q[2:], 1.0, atol=1e-6)  # far from the edge: flat
 
 
 def test_disc_planarity_holes():
@@ -261,11 +284,16 @@ def test_disc_planarity_holes():
     d1 = level_plane()
     d1[101, 101] = 0.0
     cloud1 = point_cloud_image(d1, INTR, SAMPLER)
-    np.testing.assert_allclose(disc_planarity(cloud1, _cand(cloud1, 100, 100), PLANARITY), 1.0,
-                               atol=1e-9)
+    np.testing.assert_allclose(
+        disc_planarity(cloud1, _cand(cloud1, 100, 100), PLANARITY), 1.0, atol=1e-9
+    )
     # Stricter coverage requirement turns that into 0 as well.
-    assert disc_planarity(cloud1, _cand(cloud1, 100, 100),
-                          dataclasses.replace(PLANARITY, min_coverage=0.99))[0] == 0.0
+    assert (
+        disc_planarity(
+            cloud1, _cand(cloud1, 100, 100), dataclasses.replace(PLANARITY, min_coverage=0.99)
+        )[0]
+        == 0.0
+    )
 
 
 def test_disc_planarity_wrong_axis_is_penalised():

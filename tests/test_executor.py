@@ -10,27 +10,43 @@ import sys
 from pathlib import Path
 
 import pytest
+from conftest import conf_section
 from hydra.errors import ConfigCompositionException
 
-from conftest import conf_section
-from pipeline.cli import compose
-from pipeline.executor import RAY_INSTALL_HINT, import_ray, map_shards, start_ray
-from pipeline.generate import generate
-from pipeline.label import label
-from pipeline.repro_check import compare_artifacts
+from pipeline.runtime.cli import compose
+from pipeline.runtime.executor import RAY_INSTALL_HINT, import_ray, map_shards, start_ray
+from pipeline.stages.generate import generate
+from pipeline.stages.label import label
+from pipeline.tools.repro_check import compare_artifacts
 
 ray = pytest.importorskip("ray")
 
 # 4 generation / labelling shards (train 2 + val 1 + test 1), 2 logged scenes.
-TINY = ("generate.num_scenes=3", "generate.num_val_scenes=1", "generate.num_test_scenes=1",
-        "generate.scenes_per_shard=2", "logging.max_logged_scenes=2", "logging.progress=false")
+TINY = (
+    "generate.num_scenes=3",
+    "generate.num_val_scenes=1",
+    "generate.num_test_scenes=1",
+    "generate.scenes_per_shard=2",
+    "logging.max_logged_scenes=2",
+    "logging.progress=false",
+)
 RUNS = (("local", 1), ("local", 2), ("ray", 2))
 RAY = conf_section("executor", "executor=ray")
 
 
 def _cfg(stage: str, root: Path, executor: str, workers: int, *extra: str):
-    return compose(stage, ["experiment=smoke", f"paths.root={root}", *TINY, f"executor={executor}",
-                           f"generate.workers={workers}", f"label.workers={workers}", *extra])
+    return compose(
+        stage,
+        [
+            "experiment=smoke",
+            f"paths.root={root}",
+            *TINY,
+            f"executor={executor}",
+            f"generate.workers={workers}",
+            f"label.workers={workers}",
+            *extra,
+        ],
+    )
 
 
 # Trivial tasks. Module-level, so Ray pickles them by reference: the fixture below puts this
@@ -86,8 +102,19 @@ def test_same_artifact_whatever_the_executor(artifacts, stage):
 
 def test_ray_results_in_task_order(ray_instance):
     tasks = list(range(12))
-    out = list(map_shards(_square, tasks, init=_init, initargs=(7,), workers=2, desc="t",
-                          progress=False, size=lambda t: 1, executor=RAY))
+    out = list(
+        map_shards(
+            _square,
+            tasks,
+            init=_init,
+            initargs=(7,),
+            workers=2,
+            desc="t",
+            progress=False,
+            size=lambda t: 1,
+            executor=RAY,
+        )
+    )
     assert [r for r, _ in out] == [x * x + 7 for x in tasks]
     pids = {pid for _, pid in out}
     assert len(pids) == 2 and os.getpid() not in pids  # two Ray worker processes
@@ -96,8 +123,19 @@ def test_ray_results_in_task_order(ray_instance):
 
 def test_ray_task_error_surfaces_with_its_message(ray_instance):
     with pytest.raises(ValueError, match="task -2 is negative") as info:
-        list(map_shards(_square, [1, -2, 3], init=_init, initargs=(0,), workers=2, desc="t",
-                        progress=False, size=lambda t: 1, executor=RAY))
+        list(
+            map_shards(
+                _square,
+                [1, -2, 3],
+                init=_init,
+                initargs=(0,),
+                workers=2,
+                desc="t",
+                progress=False,
+                size=lambda t: 1,
+                executor=RAY,
+            )
+        )
     assert "Ray worker" in "".join(getattr(info.value, "__notes__", []))
 
 
@@ -118,15 +156,27 @@ def test_ray_task_error_fails_the_stage(artifacts, tmp_path, monkeypatch):
 
 
 def test_ray_from_the_command_line(artifacts, tmp_path):
-    """``python -m pipeline.label executor=ray``: the stage's functions live in ``__main__`` there;
-    the workers must still run them with shared module state. Same artifact as in-process."""
+    """``python -m pipeline.stages.label executor=ray``: the stage's functions live in ``__main__``
+    there; the workers must still run them with shared module state. Same artifact as in-process."""
     gen, lab = artifacts["local", 1]
     shutil.copytree(gen, tmp_path / "data" / "generate" / gen.name)
     env = {k: v for k, v in os.environ.items() if k != "RAY_ADDRESS"}
-    subprocess.run([sys.executable, "-m", "pipeline.label", "experiment=smoke", *TINY,
-                    f"paths.root={tmp_path}", "executor=ray", "label.workers=2",
-                    f"label.generate_version={gen.name}"], check=True, env=env,
-                   cwd=Path(__file__).parents[1])
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pipeline.stages.label",
+            "experiment=smoke",
+            *TINY,
+            f"paths.root={tmp_path}",
+            "executor=ray",
+            "label.workers=2",
+            f"label.generate_version={gen.name}",
+        ],
+        check=True,
+        env=env,
+        cwd=Path(__file__).parents[1],
+    )
     other = tmp_path / "data" / "label" / lab.name
     assert compare_artifacts("label", lab, other) == []
 

@@ -9,12 +9,12 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-
 from conftest import default_config
+
 from pipeline.camera.geometry import Intrinsics
-from pipeline.labelling.types import GraspClass
 from pipeline.controller.observation import Observation
 from pipeline.controller.planning import Grasp
+from pipeline.grasping.types import GraspClass
 from pipeline.planner.ranking import GraspCandidate, RankingConfig, graspability, order_candidates
 from pipeline.servo.descriptor import DescriptorConfig
 
@@ -24,9 +24,18 @@ D_GROUND = 0.645
 def cand(name: str, phi_deg: float, depth: float, prob: float = 0.9) -> GraspCandidate:
     phi = math.radians(phi_deg)
     score, jd, ji = graspability(depth, phi, D_GROUND, PAPER.phi_switch)
-    c = GraspCandidate(u=0.0, v=0.0, grasp_class=GraspClass.L, probability=prob, score=score,
-                       phi=phi, depth=depth, normal_cam=np.zeros(3, np.float32), j_distance=jd,
-                       j_inclination=ji)
+    c = GraspCandidate(
+        u=0.0,
+        v=0.0,
+        grasp_class=GraspClass.L,
+        probability=prob,
+        score=score,
+        phi=phi,
+        depth=depth,
+        normal_cam=np.zeros(3, np.float32),
+        j_distance=jd,
+        j_inclination=ji,
+    )
     c.name = name
     return c
 
@@ -58,7 +67,9 @@ def test_inclinations_far_apart_keep_the_paper_order():
 def test_level_best_is_unchanged_and_ties_chain_greedily():
     # The best is level (φ < 30°): J is already J_distance, the tie-break does not apply.
     a, b = cand("a", 10, 0.50), cand("b", 12, 0.40)
-    assert names(order_candidates([a, b], TIE)) == names(order_candidates([a, b], PAPER)) == ["b", "a"]
+    assert (
+        names(order_candidates([a, b], TIE)) == names(order_candidates([a, b], PAPER)) == ["b", "a"]
+    )
     # Inclined best (31°) and a level face 6° flatter but higher: they tie, the higher goes first;
     # then the 50° face, far from both, keeps its place in the paper's order.
     x, y, z = cand("x", 31, 0.55), cand("y", 25, 0.42), cand("z", 50, 0.30)
@@ -79,9 +90,11 @@ def _controller(ratio: float, cup_diameter: float = 0.030):
     ctrl = RobotController.__new__(RobotController)
     ctrl.cfg = SimpleNamespace(
         evaluate=SimpleNamespace(min_area_ratio=ratio, max_candidates_checked=10),
-        hand=SimpleNamespace(cup_diameter=cup_diameter))
-    ctrl.descriptor_cfg = default_config(DescriptorConfig, window_tolerance_depth=0.0,
-                                         track_normal_deg=0.0)
+        hand=SimpleNamespace(cup_diameter=cup_diameter),
+    )
+    ctrl.descriptor_cfg = default_config(
+        DescriptorConfig, window_tolerance_depth=0.0, track_normal_deg=0.0
+    )
     ctrl.timings = {"descriptor_s": []}
     return ctrl
 
@@ -96,13 +109,17 @@ def test_area_check_drops_surfaces_barely_larger_than_the_cup():
     depth[20:42, 20:42] = 0.50
     depth[80:110, 80:110] = 0.50
     obs = Observation(depth, intr, np.eye(4), np.zeros(7))
-    small, big, big_b = (Grasp(30.5, 30.5, "L", score=1.0), Grasp(94.5, 94.5, "L", score=2.0),
-                         Grasp(94.5, 94.5, "B", score=3.0))
+    small, big, big_b = (
+        Grasp(30.5, 30.5, "L", score=1.0),
+        Grasp(94.5, 94.5, "L", score=2.0),
+        Grasp(94.5, 94.5, "B", score=3.0),
+    )
     cands = [small, big, big_b]
 
     def kept(ctrl):
-        return [{1.0: "small", 2.0: "big", 3.0: "big_b"}[g.score]
-                for g in ctrl.large_enough(obs, cands)]
+        return [
+            {1.0: "small", 2.0: "big", 3.0: "big_b"}[g.score] for g in ctrl.large_enough(obs, cands)
+        ]
 
     assert _controller(0.0).large_enough(obs, cands) == cands  # off: unchanged
     assert kept(_controller(1.0)) == ["small", "big"]

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-from pathlib import Path
 
 import numpy as np
 import pybullet as p
@@ -15,15 +14,19 @@ from omegaconf import OmegaConf
 from pipeline.artifacts import compute_version, load_manifest, stage_config, verify_artifact
 from pipeline.artifacts.store import ArtifactError, resolve_artifact
 from pipeline.camera.geometry import backproject
-from pipeline.cli import compose
 from pipeline.dataset import SceneDataset
-from pipeline.generate import NOT_AFFECTING_RESULT, SECTIONS, generate
+from pipeline.runtime.cli import compose
 from pipeline.simulation.heap import corner_drift, settle
 from pipeline.simulation.scene import connect, scene_rng, simulate_scene
+from pipeline.stages.generate import NOT_AFFECTING_RESULT, SECTIONS, generate
 from pipeline.tracking import mcap_message_counts, rrd_entity_paths
 
-TINY = ("generate.num_scenes=3", "generate.num_val_scenes=1", "generate.num_test_scenes=1",
-        "generate.scenes_per_shard=2")
+TINY = (
+    "generate.num_scenes=3",
+    "generate.num_val_scenes=1",
+    "generate.num_test_scenes=1",
+    "generate.scenes_per_shard=2",
+)
 
 
 @pytest.fixture(scope="module")
@@ -61,9 +64,9 @@ def test_heap_really_at_rest(client, sim_cfg):
 def test_heaps_of_20_really_at_rest(client, sim_cfg):
     """24 heaps of 20 boxes (the bench's rest check, same seeds): after the rest criterion
     fires, one more simulated second moves no corner of any box by more than 2 mm."""
-    from pipeline.bench import rest_check_rng
     from pipeline.cell.bin import build_cell
     from pipeline.simulation.heap import drop_heap
+    from pipeline.tools.bench.common import rest_check_rng
 
     boxes = dataclasses.replace(sim_cfg.boxes, min_count=20, max_count=20)
     one_second = int(round(1.0 / sim_cfg.physics.time_step))
@@ -89,8 +92,7 @@ def test_settle_declares_rest_by_displacement_over_a_window(client, sim_cfg):
 
     build_cell(client, sim_cfg.bin, sim_cfg.physics)
     p.setGravity(0, 0, 0, physicsClientId=client)
-    col = p.createCollisionShape(p.GEOM_BOX, halfExtents=[0.05, 0.04, 0.03],
-                                 physicsClientId=client)
+    col = p.createCollisionShape(p.GEOM_BOX, halfExtents=[0.05, 0.04, 0.03], physicsClientId=client)
     box = p.createMultiBody(1.0, col, basePosition=[0, 0, 0.1], physicsClientId=client)
     p.changeDynamics(box, -1, linearDamping=0.0, angularDamping=0.0, physicsClientId=client)
     steps, at_rest = settle(client, [box], sim_cfg.physics, 3000)
@@ -103,7 +105,7 @@ def test_settle_declares_rest_by_displacement_over_a_window(client, sim_cfg):
 def test_boxes_in_bin_and_visible(client, sim_cfg):
     scene = simulate_scene(client, sim_cfg, scene_rng(0, 0, 3))
     assert scene.num_dropped == len(scene.boxes) + scene.num_removed
-    for k, box in enumerate(scene.boxes, start=1):
+    for box in scene.boxes:
         assert abs(box.position[0]) < 0.2 and abs(box.position[1]) < 0.15
         assert 0 < box.position[2] < 0.3
     # Every box's pixels lie above the bin floor (depth < 0.625 m).
@@ -133,16 +135,20 @@ def test_version_key(sim_cfg, tmp_path):
     assert key("physics.solver_iterations=60") != k0
     # And so do the upstream versions.
     cfg = compose("generate", ["experiment=smoke"])
-    assert compute_version("generate", stage_config(cfg, SECTIONS), {"x": "1"}) != \
-        compute_version("generate", stage_config(cfg, SECTIONS), {"x": "2"})
+    assert compute_version("generate", stage_config(cfg, SECTIONS), {"x": "1"}) != compute_version(
+        "generate", stage_config(cfg, SECTIONS), {"x": "2"}
+    )
 
 
-@pytest.mark.parametrize("override", [
-    "generate.num_scene=3",        # typo in a key
-    "generate.num_scenes=many",    # wrong type
-    "camera.fx=[1,2]",
-    "experiment=smok",             # unknown experiment
-])
+@pytest.mark.parametrize(
+    "override",
+    [
+        "generate.num_scene=3",  # typo in a key
+        "generate.num_scenes=many",  # wrong type
+        "camera.fx=[1,2]",
+        "experiment=smok",  # unknown experiment
+    ],
+)
 def test_config_typo_rejected(override):
     with pytest.raises(ConfigCompositionException):
         compose("generate", ["experiment=smoke", override])
@@ -154,14 +160,33 @@ def test_artifact_and_loader(smoke_cfg, tmp_path):
     assert folder == (tmp_path / "data" / "generate" / folder.name)
     assert (tmp_path / "data" / "generate" / "latest").resolve() == folder.resolve()
     manifest = load_manifest(folder)
-    for key in ("stage", "version", "created", "config", "upstream", "code", "packages",
-                "platform", "seed", "files", "metrics", "timings"):
+    for key in (
+        "stage",
+        "version",
+        "created",
+        "config",
+        "upstream",
+        "code",
+        "packages",
+        "platform",
+        "seed",
+        "files",
+        "metrics",
+        "timings",
+    ):
         assert key in manifest
     assert set(manifest["platform"]) == {"machine", "cpu", "system", "libc"}
     assert manifest["version"] == folder.name
-    assert set(manifest["files"]) >= {"camera.json", "index.json", "log.rrd", "log.mcap",
-                                      "scenes/train-00000.npz", "scenes/train-00001.npz",
-                                      "scenes/val-00000.npz", "scenes/test-00000.npz"}
+    assert set(manifest["files"]) >= {
+        "camera.json",
+        "index.json",
+        "log.rrd",
+        "log.mcap",
+        "scenes/train-00000.npz",
+        "scenes/train-00001.npz",
+        "scenes/val-00000.npz",
+        "scenes/test-00000.npz",
+    }
     assert verify_artifact(folder) == []
 
     ds = SceneDataset(folder, "train")
@@ -199,8 +224,13 @@ def test_artifact_and_loader(smoke_cfg, tmp_path):
 
     # Logs: read back entities and message counts.
     entities = rrd_entity_paths(folder / "log.rrd")
-    assert {"/world/camera", "/world/camera/depth", "/world/camera/mask", "/world/boxes",
-            "/world/bin"} <= entities
+    assert {
+        "/world/camera",
+        "/world/camera/depth",
+        "/world/camera/mask",
+        "/world/boxes",
+        "/world/bin",
+    } <= entities
     counts = mcap_message_counts(folder / "log.mcap")
     assert counts["/world/camera/depth"] == 5 and counts["/world/camera/mask"] == 5
     assert counts["/world/boxes"] == 5 and counts["/world/bin"] == 1
@@ -219,8 +249,16 @@ def test_rerun_reuses_and_force_recomputes(smoke_cfg, capsys):
 
 def test_same_artifact_whatever_the_workers(tmp_path):
     def files(workers: int) -> dict:
-        cfg = compose("generate", ["experiment=smoke", *TINY, f"paths.root={tmp_path / str(workers)}",
-                                   f"generate.workers={workers}", "logging.progress=false"])
+        cfg = compose(
+            "generate",
+            [
+                "experiment=smoke",
+                *TINY,
+                f"paths.root={tmp_path / str(workers)}",
+                f"generate.workers={workers}",
+                "logging.progress=false",
+            ],
+        )
         m = load_manifest(generate(cfg))
         return {k: v for k, v in m["files"].items() if k != "log.rrd"}
 
@@ -228,7 +266,7 @@ def test_same_artifact_whatever_the_workers(tmp_path):
 
 
 def test_exception_leaves_no_artifact(smoke_cfg, tmp_path, monkeypatch):
-    import pipeline.generate as gen
+    import pipeline.stages.generate as gen
 
     def boom(*args, **kwargs):
         raise RuntimeError("simulated crash")
@@ -256,8 +294,11 @@ def test_verify_catches_changes(smoke_cfg):
 
 def test_splits_never_share_seeds(smoke_cfg):
     folder = generate(smoke_cfg("generate", *TINY, "generate.workers=1"))
-    seeds = [SceneDataset(folder, s)[i].seed for s in ("train", "val", "test")
-             for i in range(len(SceneDataset(folder, s)))]
+    seeds = [
+        SceneDataset(folder, s)[i].seed
+        for s in ("train", "val", "test")
+        for i in range(len(SceneDataset(folder, s)))
+    ]
     assert len(set(seeds)) == len(seeds)
     assert json.loads((folder / "camera.json").read_text())["depth_unit"] == 1e-4
 
@@ -281,8 +322,14 @@ def test_jittered_heap_bodies_have_their_drawn_size_and_mass(client, sim_cfg):
     from pipeline.simulation.heap import drop_heap
 
     build_cell(client, sim_cfg.bin, sim_cfg.physics)
-    heap = drop_heap(client, np.random.default_rng(11), sim_cfg.boxes, sim_cfg.bin,
-                     sim_cfg.physics, size_jitter=0.2)
+    heap = drop_heap(
+        client,
+        np.random.default_rng(11),
+        sim_cfg.boxes,
+        sim_cfg.bin,
+        sim_cfg.physics,
+        size_jitter=0.2,
+    )
     assert heap.boxes
     for box in heap.boxes:
         base = np.asarray(sim_cfg.boxes.types[box.type_index].size)
@@ -302,10 +349,17 @@ def test_unseen_sizes_stay_outside_every_jittered_training_type():
     cfg = OmegaConf.to_object(compose("generate", ["experiment=default"]))
     j = cfg.generate.size_jitter
     train = [np.asarray(t.size) for t in cfg.boxes.types]
-    others = [np.asarray(t.size) for t in OmegaConf.to_object(
-        compose("generate", ["experiment=default", "boxes=unseen"])).boxes.types]
-    others += [np.asarray(t.size) for t in cfg.eval_boxes.types
-               if not any(np.array_equal(t.size, s) for s in train)]
+    others = [
+        np.asarray(t.size)
+        for t in OmegaConf.to_object(
+            compose("generate", ["experiment=default", "boxes=unseen"])
+        ).boxes.types
+    ]
+    others += [
+        np.asarray(t.size)
+        for t in cfg.eval_boxes.types
+        if not any(np.array_equal(t.size, s) for s in train)
+    ]
     assert len(others) == 11
     for size in others:
         for base in train:

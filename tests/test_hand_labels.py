@@ -6,24 +6,33 @@ import dataclasses
 
 import numpy as np
 import pytest
-
 from conftest import conf_section
-from pipeline.labelling.hand import (
-    camera_centre, hand_label, rotation_between,
-)
-from pipeline.robot.target_pose import target_camera_pose
-from pipeline.labelling.types import GraspClass, Surface
 
-CFG = conf_section("hand")  # conf/hand/two_cup.yaml: cups: r = 9 mm, offset 35 mm, margin 2 mm, area ratio 1.2
+from pipeline.grasping.hand import camera_centre, hand_label, rotation_between
+from pipeline.grasping.types import GraspClass, Surface
+from pipeline.robot.target_pose import target_camera_pose
+
+CFG = conf_section(
+    "hand"
+)  # conf/hand/two_cup.yaml: cups: r = 9 mm, offset 35 mm, margin 2 mm, area ratio 1.2
 
 
 def surface(long_axis, normal, L_l, L_s, center=(0.0, 0.0, 0.6)):
     n = np.asarray(normal, float) / np.linalg.norm(normal)
-    l = np.asarray(long_axis, float) / np.linalg.norm(long_axis)
-    s = np.cross(n, l)
-    return Surface(instance=1, center_cam=np.asarray(center, float), normal_cam=n,
-                   long_axis_cam=l, short_axis_cam=s, long_length=L_l, short_length=L_s,
-                   center_px=np.zeros(2), num_points=1000, area=L_l * L_s)
+    long_dir = np.asarray(long_axis, float) / np.linalg.norm(long_axis)
+    s = np.cross(n, long_dir)
+    return Surface(
+        instance=1,
+        center_cam=np.asarray(center, float),
+        normal_cam=n,
+        long_axis_cam=long_dir,
+        short_axis_cam=s,
+        long_length=L_l,
+        short_length=L_s,
+        center_px=np.zeros(2),
+        num_points=1000,
+        area=L_l * L_s,
+    )
 
 
 def test_rotation_between():
@@ -79,7 +88,10 @@ def test_area_ratio_rejects_a_face_barely_larger_than_a_cup():
     # 0.024 × 0.024: fits (0.012 ≥ 0.011); area 5.76e-4 ≥ 1.2 × 2.545e-4 = 3.05e-4 → L.
     assert hand_label(surface([1, 0, 0], [0, 0, -1], 0.024, 0.024), CFG).grasp_class == GraspClass.L
     strict = dataclasses.replace(CFG, min_area_ratio=2.5)  # 2.5 × 2.545e-4 = 6.36e-4 > 5.76e-4 → NG
-    assert hand_label(surface([1, 0, 0], [0, 0, -1], 0.024, 0.024), strict).grasp_class == GraspClass.NG
+    assert (
+        hand_label(surface([1, 0, 0], [0, 0, -1], 0.024, 0.024), strict).grasp_class
+        == GraspClass.NG
+    )
 
 
 def test_tilted_face_picks_the_higher_camera():
@@ -89,10 +101,12 @@ def test_tilted_face_picks_the_higher_camera():
     # L: O_B + 0.035 Y = (0, −0.04469, 0.40260); R: O_B − 0.035 Y = (0, −0.10531, 0.43760).
     # L's camera is higher (smaller z in the home camera frame) → L.
     s = surface([1, 0, 0], [0, -0.5, -np.sqrt(3) / 2], 0.12, 0.06, center=(0, 0, 0.55))
-    assert camera_centre(s, np.array([1.0, 0, 0]), GraspClass.L, CFG) == \
-        pytest.approx([0, -0.044689, 0.402596], abs=1e-6)
-    assert camera_centre(s, np.array([1.0, 0, 0]), GraspClass.R, CFG) == \
-        pytest.approx([0, -0.105311, 0.437596], abs=1e-6)
+    assert camera_centre(s, np.array([1.0, 0, 0]), GraspClass.L, CFG) == pytest.approx(
+        [0, -0.044689, 0.402596], abs=1e-6
+    )
+    assert camera_centre(s, np.array([1.0, 0, 0]), GraspClass.R, CFG) == pytest.approx(
+        [0, -0.105311, 0.437596], abs=1e-6
+    )
     assert hand_label(s, CFG).grasp_class == GraspClass.L
     # Tilted the other way, R's camera is the higher one.
     s2 = surface([1, 0, 0], [0, 0.5, -np.sqrt(3) / 2], 0.12, 0.06, center=(0, 0, 0.55))
@@ -100,8 +114,9 @@ def test_tilted_face_picks_the_higher_camera():
 
 
 def test_target_axes_right_handed():
-    R = target_camera_pose(np.array([0, 0, 0.55]), np.array([0, -0.5, -np.sqrt(3) / 2]),
-                           np.array([1.0, 0, 0]), "B")[:3, :3]
+    R = target_camera_pose(
+        np.array([0, 0, 0.55]), np.array([0, -0.5, -np.sqrt(3) / 2]), np.array([1.0, 0, 0]), "B"
+    )[:3, :3]
     assert R[:, 2] == pytest.approx([0, 0.5, np.sqrt(3) / 2])
     assert R[:, 1] == pytest.approx([0, np.sqrt(3) / 2, -0.5])
     assert np.linalg.det(R) == pytest.approx(1.0)
@@ -126,8 +141,14 @@ def _tilted_end_face(tilt_deg):
     surf = surface([1, 0, 0], n, 0.092, 0.052, center=c)
     T_cam_box = np.eye(4)
     T_cam_box[:3, 3] = c - 0.0725 * n
-    box = Box(instance=1, type_index=1, type_name="medium", size=np.array([0.145, 0.092, 0.052]),
-              T_world_box=np.eye(4), T_cam_box=T_cam_box)
+    box = Box(
+        instance=1,
+        type_index=1,
+        type_name="medium",
+        size=np.array([0.145, 0.092, 0.052]),
+        T_world_box=np.eye(4),
+        T_cam_box=T_cam_box,
+    )
     T_world_cam = np.diag([1.0, -1.0, -1.0, 1.0])
     T_world_cam[2, 3] = 0.625
     return surf, box, T_world_cam
@@ -135,14 +156,15 @@ def _tilted_end_face(tilt_deg):
 
 @pytest.mark.parametrize("tilt_deg, holds", [(0.0, True), (20.0, True), (35.0, False)])
 def test_hold_check_one_cup_on_a_tilted_end_face(tilt_deg, holds):
-    from pipeline.dexnet.contact import suction_model_config
-    from pipeline.labelling.scene import pattern_holds
-
     from conftest import composed
+
+    from pipeline.grasping.suction import suction_model_config
+    from pipeline.labelling.scene import pattern_holds
 
     suction = suction_model_config(composed(), 400.0)
     assert (suction.vacuum_force, suction.cup_radius, suction.gravity) == pytest.approx(
-        (12.7, 0.009, 9.81))
+        (12.7, 0.009, 9.81)
+    )
     surf, box, T_world_cam = _tilted_end_face(tilt_deg)
     lab = dataclasses.replace(hand_label(surf, CFG), grasp_class=GraspClass.L)
     assert pattern_holds(surf, lab, box, T_world_cam, suction, CFG.cup_offset) is holds
@@ -158,7 +180,7 @@ def test_a_blocked_b_falls_back_on_one_cup_by_hand():
     → NG. ``single_cup_order``: on a face tilted 20° about the camera's x axis (its +y side
     nearer the camera), the hand's Y runs along the tilt, so one camera sits higher: that
     pattern comes first; a level face ties and L comes first; an L has no fallback."""
-    from pipeline.labelling.hand import HandLabel
+    from pipeline.grasping.hand import HandLabel
     from pipeline.labelling.scene import robot_level_class, single_cup_order
 
     b = HandLabel(GraspClass.B, np.array([1.0, 0, 0]), 0.0, 90.0, "long")
@@ -173,10 +195,11 @@ def test_a_blocked_b_falls_back_on_one_cup_by_hand():
     assert robot_level_class(b, check(()), holds(), (L, R)) == (GraspClass.B, "")
     assert robot_level_class(b, check({GraspClass.B}), holds(), (L, R)) == (L, "")
     assert robot_level_class(b, check({GraspClass.B}), holds({L}), (L, R)) == (R, "")
-    assert robot_level_class(b, check({GraspClass.B, L, R}), holds(), (L, R)) == \
-        (GraspClass.NG, "collision")
-    assert robot_level_class(b, check({GraspClass.B}), holds(), ()) == (GraspClass.NG,
-                                                                       "collision")
+    assert robot_level_class(b, check({GraspClass.B, L, R}), holds(), (L, R)) == (
+        GraspClass.NG,
+        "collision",
+    )
+    assert robot_level_class(b, check({GraspClass.B}), holds(), ()) == (GraspClass.NG, "collision")
     hand = CFG
     level = surface((1.0, 0, 0), (0, 0, -1.0), 0.145, 0.092)
     lab = hand_label(level, hand)

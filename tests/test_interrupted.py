@@ -5,7 +5,8 @@ Each stage runs as a subprocess through its command line (``python -m pipeline.<
 killed (``Popen.kill``) once the file system shows it reached a point (its work folder exists,
 N shard files are written, the log is being written, a training checkpoint appears), and is run
 again to completion. The result is compared with an uninterrupted reference run in another
-``paths.root``: same version, same files (``pipeline.repro_check.compare_artifacts``, Rerun logs
+``paths.root``: same version, same files (``pipeline.tools.repro_check.compare_artifacts``, Rerun
+logs
 by content) and the same manifest apart from ``created`` and ``timings``.
 
 The default run keeps one kill per stage; ``-m slow`` adds kills at more points.
@@ -21,30 +22,50 @@ import subprocess
 import sys
 import textwrap
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import pytest
 
-from pipeline.artifacts.fingerprint import REPO_ROOT
+from pipeline.artifacts.fingerprint import REPO_ROOT, stage_module
+from pipeline.artifacts.locking import LOCK_PREFIX, TMP_PREFIX
 from pipeline.artifacts.store import (
-    LOCK_PREFIX, MANIFEST, STATE_DIR, TMP_PREFIX, ArtifactError, ArtifactWriter, load_manifest,
-    resolve_artifact, run_stage, verify_artifact,
+    MANIFEST,
+    STATE_DIR,
+    ArtifactError,
+    ArtifactWriter,
+    load_manifest,
+    resolve_artifact,
+    run_stage,
+    verify_artifact,
 )
-from pipeline.repro_check import compare_artifacts
+from pipeline.tools.repro_check import compare_artifacts
 
-OVERRIDES = ("experiment=smoke", "logging.progress=false",
-             "generate.num_scenes=6", "generate.num_val_scenes=2", "generate.num_test_scenes=2",
-             "generate.scenes_per_shard=2", "label.robot_checks=false", "label.workers=1",
-             "train.epochs=3")
+OVERRIDES = (
+    "experiment=smoke",
+    "logging.progress=false",
+    "generate.num_scenes=6",
+    "generate.num_val_scenes=2",
+    "generate.num_test_scenes=2",
+    "generate.scenes_per_shard=2",
+    "label.robot_checks=false",
+    "label.workers=1",
+    "train.epochs=3",
+)
 SHARDS = 5  # 3 train + 1 val + 1 test shards of 2 scenes
 TOP = {"generate": "data", "label": "data", "train": "models"}
 VOLATILE = ("created", "timings")
 
 
 def _cmd(stage: str, root: Path, workers: int = 1) -> list[str]:
-    return [sys.executable, "-m", f"pipeline.{stage}", f"paths.root={root}", *OVERRIDES,
-            f"generate.workers={workers}"]
+    return [
+        sys.executable,
+        "-m",
+        stage_module(stage),
+        f"paths.root={root}",
+        *OVERRIDES,
+        f"generate.workers={workers}",
+    ]
 
 
 def _env() -> dict:
@@ -53,8 +74,9 @@ def _env() -> dict:
 
 def _run(stage: str, root: Path) -> str:
     """Run ``stage`` to completion; its output."""
-    res = subprocess.run(_cmd(stage, root), cwd=REPO_ROOT, env=_env(), capture_output=True,
-                         text=True, timeout=300)
+    res = subprocess.run(
+        _cmd(stage, root), cwd=REPO_ROOT, env=_env(), capture_output=True, text=True, timeout=300
+    )
     out = res.stdout + res.stderr
     assert res.returncode == 0, f"{stage} failed:\n{out[-3000:]}"
     return out
@@ -68,23 +90,36 @@ def _work_dir(root: Path, stage: str, version: str) -> Path:
     return _stage_dir(root, stage) / f"{TMP_PREFIX}{version}"
 
 
-def _kill_when(stage: str, root: Path, ready: Callable[[], bool], timeout: float = 240.0,
-               workers: int = 1, sig: int = signal.SIGKILL):
+def _kill_when(
+    stage: str,
+    root: Path,
+    ready: Callable[[], bool],
+    timeout: float = 240.0,
+    workers: int = 1,
+    sig: int = signal.SIGKILL,
+):
     """Start ``stage``, send it ``sig`` (SIGKILL) as soon as ``ready()``; fails if it ended
     before."""
     log = root / f"{stage}-killed.log"
     with open(log, "a") as out:
         # SIGINT at its default in the stage, whatever this process inherited: a shell starts a
         # background job with SIGINT ignored, and Python then never raises KeyboardInterrupt
-        proc = subprocess.Popen(_cmd(stage, root, workers), cwd=REPO_ROOT, env=_env(),
-                                stdout=out, stderr=subprocess.STDOUT,
-                                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+        proc = subprocess.Popen(
+            _cmd(stage, root, workers),
+            cwd=REPO_ROOT,
+            env=_env(),
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+        )
     try:
         deadline = time.monotonic() + timeout
         while not ready():
             if proc.poll() is not None:
-                pytest.fail(f"{stage} ended (exit {proc.returncode}) before the kill point:\n"
-                            + log.read_text()[-3000:])
+                pytest.fail(
+                    f"{stage} ended (exit {proc.returncode}) before the kill point:\n"
+                    + log.read_text()[-3000:]
+                )
             assert time.monotonic() < deadline, f"{stage} never reached the kill point"
             time.sleep(0.01)
         assert proc.poll() is None, f"{stage} ended before it could be killed"
@@ -125,8 +160,7 @@ def _assert_same_as(reference: Path, folder: Path, stage: str) -> None:
     assert a == b
     # Nothing of the interrupted runs is left beside the artifact.
     stage_dir = folder.parent
-    left = [p.name for p in stage_dir.iterdir()
-            if p.name.startswith((TMP_PREFIX, LOCK_PREFIX))]
+    left = [p.name for p in stage_dir.iterdir() if p.name.startswith((TMP_PREFIX, LOCK_PREFIX))]
     assert left == []
 
 
@@ -175,33 +209,38 @@ def _ckpt_epoch(root: Path) -> int:
         st = found[0].stat()
         key = (str(found[0]), st.st_ino, st.st_mtime_ns, st.st_size)
         if key not in _EPOCHS:
-            _EPOCHS[key] = int(torch.load(found[0], map_location="cpu",
-                                          weights_only=True)["epoch"])
+            _EPOCHS[key] = int(torch.load(found[0], map_location="cpu", weights_only=True)["epoch"])
         return _EPOCHS[key]
-    except Exception:  # noqa: BLE001 - replaced meanwhile: try again
+    except Exception:
         return 0
 
 
 # ----------------------------------------------------------------------------- generation
 
-def _check_generate(tmp_path, reference, kill_points: list[Callable[[Path, str], bool]],
-                    workers: int = 1, sig: int = signal.SIGKILL):
+
+def _check_generate(
+    tmp_path,
+    reference,
+    kill_points: list[Callable[[Path, str], bool]],
+    workers: int = 1,
+    sig: int = signal.SIGKILL,
+):
     version = reference["generate"].name
     root = _root_with(tmp_path, reference)
     seen = 0
     for ready in kill_points:
-        _kill_when("generate", root, lambda: ready(root, version), workers=workers, sig=sig)
+        _kill_when(
+            "generate", root, lambda ready=ready: ready(root, version), workers=workers, sig=sig
+        )
         seen = len(_shards(root, "generate", version))  # complete: written atomically
         _assert_nothing_visible(root, "generate", version)
         if workers > 1:  # the pool's workers died with the stage: nothing more is written
             files = sorted(p.name for p in _work_dir(root, "generate", version).rglob("*"))
             time.sleep(1.0)
-            assert sorted(p.name for p in _work_dir(root, "generate", version).rglob("*")) \
-                == files
+            assert sorted(p.name for p in _work_dir(root, "generate", version).rglob("*")) == files
     out = _run("generate", root)
     assert _resumed_shards(out, "generate") == seen
-    _assert_same_as(reference["generate"], resolve_artifact(root / "data", "generate"),
-                    "generate")
+    _assert_same_as(reference["generate"], resolve_artifact(root / "data", "generate"), "generate")
 
 
 def _n_shards(n: int):
@@ -236,18 +275,20 @@ def test_generate_interrupted_with_ctrl_c_resumes(tmp_path, reference):
 @pytest.mark.slow
 def test_generate_killed_again_and_again(tmp_path, reference):
     # Right after it took its work folder, after 3 of 5 shards, while writing its log.
-    _check_generate(tmp_path, reference,
-                    [_work_exists("generate"), _n_shards(3), _logging("generate")])
+    _check_generate(
+        tmp_path, reference, [_work_exists("generate"), _n_shards(3), _logging("generate")]
+    )
 
 
 # ----------------------------------------------------------------------------- labelling
+
 
 def _check_label(tmp_path, reference, kill_points):
     version = reference["label"].name
     root = _root_with(tmp_path, reference, "generate")
     seen = 0
     for ready in kill_points:
-        _kill_when("label", root, lambda: ready(root, version))
+        _kill_when("label", root, lambda ready=ready: ready(root, version))
         seen = len(_shards(root, "label", version))
         _assert_nothing_visible(root, "label", version)
     out = _run("label", root)
@@ -270,11 +311,12 @@ def test_label_killed_again_and_again(tmp_path, reference):
 
 # ----------------------------------------------------------------------------- training
 
+
 def _check_train(tmp_path, reference, kill_points):
     version = reference["train"].name
     root = _root_with(tmp_path, reference, "generate", "label")
     for ready in kill_points:
-        _kill_when("train", root, lambda: ready(root, version))
+        _kill_when("train", root, lambda ready=ready: ready(root, version))
         _assert_nothing_visible(root, "train", version)
     out = _run("train", root)
     epoch = _ckpt_epoch(root)
@@ -296,11 +338,11 @@ def test_train_killed_after_an_epoch_resumes(tmp_path, reference):
 def test_train_killed_again_and_again(tmp_path, reference):
     # Right after it took its work folder, after epoch 2, after the last epoch (while it
     # evaluates and writes the artifact's files).
-    _check_train(tmp_path, reference,
-                 [_work_exists("train"), _epoch(2), _epoch(3)])
+    _check_train(tmp_path, reference, [_work_exists("train"), _epoch(2), _epoch(3)])
 
 
 # ----------------------------------------------------------------------------- the store
+
 
 def test_resumable_work_folder_kept_force_empties_it(tmp_path):
     def partial(run):
@@ -336,8 +378,9 @@ def test_resumable_work_folder_kept_force_empties_it(tmp_path):
         assert not run.resumed and list(run.work_dir.iterdir()) == []
         (run.work_dir / "new.txt").write_text("x")
 
-    folder = run_stage(tmp_path, "s", "v2", {}, {}, fresh, resumable=True, force=True,
-                       say=lambda _: None)
+    folder = run_stage(
+        tmp_path, "s", "v2", {}, {}, fresh, resumable=True, force=True, say=lambda _: None
+    )
     assert sorted(load_manifest(folder)["files"]) == ["new.txt"]
 
     # An error (not an interruption) leaves nothing behind, as for any stage.
@@ -356,8 +399,11 @@ def test_resumable_work_folder_kept_force_empties_it(tmp_path):
 def test_a_second_writer_of_the_same_version_is_refused(tmp_path):
     with ArtifactWriter(tmp_path, "s", "v1", {}, {}) as run:
         (run.work_dir / "a.txt").write_text("x")
-        with pytest.raises(ArtifactError, match=rf"another run of s v1 is writing .*pid "
-                                                 rf"{os.getpid()}"):
+        with pytest.raises(
+            ArtifactError,
+            match=rf"another run of s v1 is writing .*pid "
+            rf"{os.getpid()}",
+        ):
             run_stage(tmp_path, "s", "v1", {}, {}, lambda r: None, say=lambda _: None)
         # Another version is not blocked.
         run_stage(tmp_path, "s", "v2", {}, {}, lambda r: None, say=lambda _: None)
@@ -380,8 +426,9 @@ def test_killed_writer_releases_its_lock_and_workers(tmp_path):
             print(" ".join(str(p.pid) for p in pool._pool), flush=True)
             time.sleep(600)
     """)
-    proc = subprocess.Popen([sys.executable, "-c", script], cwd=REPO_ROOT, env=_env(),
-                            stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", script], cwd=REPO_ROOT, env=_env(), stdout=subprocess.PIPE, text=True
+    )
     try:
         workers = [int(p) for p in proc.stdout.readline().split()]
         assert workers
@@ -392,8 +439,9 @@ def test_killed_writer_releases_its_lock_and_workers(tmp_path):
     while any(Path(f"/proc/{pid}").exists() and "Z" not in _state(pid) for pid in workers):
         assert time.monotonic() < deadline, "the killed run's worker is still alive"
         time.sleep(0.05)
-    folder = run_stage(tmp_path, "s", "v1", {}, {}, lambda run: None, resumable=True,
-                       say=lambda _: None)
+    folder = run_stage(
+        tmp_path, "s", "v1", {}, {}, lambda run: None, resumable=True, say=lambda _: None
+    )
     assert verify_artifact(folder) == []
 
 

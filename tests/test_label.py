@@ -4,15 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import smoke_overrides
 
 from pipeline.artifacts import load_manifest, verify_artifact
-from conftest import smoke_overrides
-from pipeline.cli import compose
 from pipeline.dataset import SceneDataset
 from pipeline.dataset.labels import LabelSet
-from pipeline.generate import generate
-from pipeline.label import label
-from pipeline.labelling.types import NG_REASONS, GraspClass
+from pipeline.grasping.types import NG_REASONS, GraspClass
+from pipeline.runtime.cli import compose
+from pipeline.stages.generate import generate
+from pipeline.stages.label import label
 from pipeline.tracking import mcap_message_counts, rrd_entity_paths
 
 
@@ -23,8 +23,11 @@ def _cfg(stage, root, *extra):
 @pytest.fixture(scope="module")
 def labelled(smoke_pipeline):
     """The session's smoke pipeline: (root, generation folder, label folder). Read-only."""
-    return (smoke_pipeline.root, smoke_pipeline.artifact("generate"),
-            smoke_pipeline.artifact("label"))
+    return (
+        smoke_pipeline.root,
+        smoke_pipeline.artifact("generate"),
+        smoke_pipeline.artifact("label"),
+    )
 
 
 def test_label_artifact(labelled):
@@ -54,15 +57,17 @@ def test_label_artifact(labelled):
             # "center_occluded" or "hold" (the hold check, hand.hold_check).
             assert ((rows["grasp_class"] == GraspClass.NG) == (rows["ng_reason"] > 0)).all()
             hand_ng = rows["hand_class"] == GraspClass.NG
-            assert np.isin(rows["ng_reason"][hand_ng],
-                           [NG_REASONS.index(r)
-                            for r in ("too_small", "center_occluded", "hold")]).all()
+            assert np.isin(
+                rows["ng_reason"][hand_ng],
+                [NG_REASONS.index(r) for r in ("too_small", "center_occluded", "hold")],
+            ).all()
             # The robot check keeps the hand-level class or turns it NG, except that a B it
             # blocks becomes L or R where one cup passes (label.single_cup_fallback).
             kept = rows["grasp_class"] != GraspClass.NG
             same = rows["grasp_class"] == rows["hand_class"]
             one_cup = (rows["hand_class"] == GraspClass.B) & np.isin(
-                rows["grasp_class"], [GraspClass.L, GraspClass.R])
+                rows["grasp_class"], [GraspClass.L, GraspClass.R]
+            )
             assert (same | one_cup)[kept].all()
             # Normals face the camera and are unit length.
             assert (np.einsum("ij,ij->i", rows["normal_cam"], rows["center_cam"]) < 0).all()
@@ -78,12 +83,19 @@ def test_label_artifact(labelled):
 def test_label_logs(labelled):
     _, gen, folder = labelled
     entities = rrd_entity_paths(folder / "log.rrd")
-    assert {"/world/camera/depth", "/world/camera/grasp_points",
-            "/world/camera/surfaces", "/world/robot/links", "/world/robot/target_camera"} <= entities
+    assert {
+        "/world/camera/depth",
+        "/world/camera/grasp_points",
+        "/world/camera/surfaces",
+        "/world/robot/links",
+        "/world/robot/target_camera",
+    } <= entities
     scenes = sum(len(SceneDataset(gen, s)) for s in ("train", "val", "test"))
     logged = min(scenes, compose("label", ["experiment=smoke"]).logging.max_logged_scenes)
     counts = mcap_message_counts(folder / "log.mcap")
-    assert counts["/world/camera/depth"] == logged and counts["/world/camera/grasp_points"] == logged
+    assert (
+        counts["/world/camera/depth"] == logged and counts["/world/camera/grasp_points"] == logged
+    )
 
 
 def test_label_same_whatever_the_workers(smoke_pipeline, labelled, tmp_path):
@@ -95,8 +107,9 @@ def test_label_same_whatever_the_workers(smoke_pipeline, labelled, tmp_path):
     assert verify_artifact(other) == []
     # Same version, recomputed with two workers: every label file identical.
     b = load_manifest(other)["files"]
-    assert {k: v for k, v in a.items() if k != "log.rrd"} == \
-        {k: v for k, v in b.items() if k != "log.rrd"}
+    assert {k: v for k, v in a.items() if k != "log.rrd"} == {
+        k: v for k, v in b.items() if k != "log.rrd"
+    }
 
 
 def test_without_robot_checks_hand_classes_stand(smoke_pipeline, tmp_path):

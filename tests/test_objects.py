@@ -10,7 +10,13 @@ import pybullet as p
 import pytest
 
 from pipeline.simulation.objects import (
-    FAMILIES, ObjectSetSpec, create_body, cylinder, prism, regular_polygon, sample_object,
+    FAMILIES,
+    ObjectSetSpec,
+    create_body,
+    cylinder,
+    prism,
+    regular_polygon,
+    sample_object,
 )
 
 
@@ -33,8 +39,9 @@ def test_cylinder_volume_and_inertia_by_hand():
     np.testing.assert_allclose(shape.inertia, [izz / 2 + V * h**2 / 12] * 2 + [izz], rtol=1e-9)
     # The solid circular cylinder's, V r^2 / 2 and V (3 r^2 + h^2) / 12, are within 0.4 %.
     Vc = np.pi * r**2 * h
-    np.testing.assert_allclose(shape.inertia, [Vc * (3 * r**2 + h**2) / 12] * 2 + [Vc * r**2 / 2],
-                               rtol=4e-3)
+    np.testing.assert_allclose(
+        shape.inertia, [Vc * (3 * r**2 + h**2) / 12] * 2 + [Vc * r**2 / 2], rtol=4e-3
+    )
 
 
 def test_prism_volumes_by_hand():
@@ -47,8 +54,7 @@ def test_prism_volumes_by_hand():
     hexagon = prism(regular_polygon(6, 0.03), 0.05)
     assert hexagon.volume == pytest.approx(3 * 0.03**2 * np.sin(np.pi / 3) * 0.05, rel=1e-12)
     # Vertex to vertex 60 mm along x, flat to flat 2 x 30 cos 30 deg = 51.96 mm along y.
-    np.testing.assert_allclose(hexagon.extents, [0.06, 0.06 * np.cos(np.pi / 6), 0.05],
-                               atol=1e-12)
+    np.testing.assert_allclose(hexagon.extents, [0.06, 0.06 * np.cos(np.pi / 6), 0.05], atol=1e-12)
 
 
 def test_sampled_objects_are_closed_convex_and_centred():
@@ -93,17 +99,16 @@ def test_same_seed_same_object():
 def test_body_falls_onto_a_plane_and_rests(client):
     p.setGravity(0, 0, -9.81, physicsClientId=client)
     p.setPhysicsEngineParameter(fixedTimeStep=1 / 240, physicsClientId=client)
-    plane = p.createCollisionShape(p.GEOM_BOX, halfExtents=[1.0, 1.0, 0.01],
-                                   physicsClientId=client)
-    ground = p.createMultiBody(0.0, plane, -1, basePosition=[0, 0, -0.01],
-                               physicsClientId=client)
+    plane = p.createCollisionShape(p.GEOM_BOX, halfExtents=[1.0, 1.0, 0.01], physicsClientId=client)
+    ground = p.createMultiBody(0.0, plane, -1, basePosition=[0, 0, -0.01], physicsClientId=client)
     p.changeDynamics(ground, -1, lateralFriction=0.5, physicsClientId=client)
     rng = np.random.default_rng(3)
     spec = ObjectSetSpec(families=("hull",))
     shape = sample_object(rng, spec)
     density = 400.0
-    body = create_body(client, shape, density, 0.5, [0.0, 0.0, 0.2],
-                       p.getQuaternionFromEuler([0.3, 0.2, 0.1]))
+    body = create_body(
+        client, shape, density, 0.5, [0.0, 0.0, 0.2], p.getQuaternionFromEuler([0.3, 0.2, 0.1])
+    )
     info = p.getDynamicsInfo(body, -1, physicsClientId=client)
     assert info[0] == pytest.approx(density * shape.volume, rel=1e-12)
     assert info[1] == pytest.approx(0.5)
@@ -120,8 +125,9 @@ def test_body_falls_onto_a_plane_and_rests(client):
     assert np.linalg.norm(lin) < 1e-3 and np.linalg.norm(ang) < 1e-2
     # Resting on the plane: its lowest vertex (world frame) within the 1 mm collision margin
     # (and contact slop) above z = 0, and the COM above it.
-    R = np.array(p.getMatrixFromQuaternion(
-        p.getBasePositionAndOrientation(body, physicsClientId=client)[1])).reshape(3, 3)
+    R = np.array(
+        p.getMatrixFromQuaternion(p.getBasePositionAndOrientation(body, physicsClientId=client)[1])
+    ).reshape(3, 3)
     lowest = (shape.vertices @ R.T + after)[:, 2].min()
     assert -1e-3 < lowest < 2.5e-3
     assert after[2] > lowest
@@ -132,8 +138,9 @@ def test_body_is_drawn_by_the_renderer(client):
     body = create_body(client, shape, 400.0, 0.5, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
     view = p.computeViewMatrix([0, 0, 0.5], [0, 0, 0], [0, 1, 0])
     proj = p.computeProjectionMatrixFOV(40.0, 1.0, 0.1, 2.0)
-    _, _, _, _, seg = p.getCameraImage(32, 32, view, proj, renderer=p.ER_TINY_RENDERER,
-                                       physicsClientId=client)
+    _, _, _, _, seg = p.getCameraImage(
+        32, 32, view, proj, renderer=p.ER_TINY_RENDERER, physicsClientId=client
+    )
     seg = np.asarray(seg).reshape(32, 32)
     # The 60 mm disc, 0.46 m from the camera, with a 40 deg field of view over 32 pixels:
     # 2 x 0.46 tan 20 deg / 32 = 10.5 mm a pixel, a disc 5.7 pixels across: about 26 pixels.

@@ -13,16 +13,20 @@ from __future__ import annotations
 import numpy as np
 import pybullet as p
 import pytest
-
 from conftest import conf_section, default_config
+
 from pipeline.camera.geometry import Intrinsics, camera_pose_above_bin
 from pipeline.camera.raycast import boxes_from_pybullet, raycast_boxes
 from pipeline.camera.raycast_convex import (
-    box_shape, convex_from_pybullet, convex_shape, raycast_convex,
+    box_shape,
+    convex_from_pybullet,
+    convex_shape,
+    raycast_convex,
 )
 from pipeline.camera.render import render_depth
-from pipeline.dexnet.contact import REASONS, SuctionModelConfig
+from pipeline.dexnet.contact import REASONS
 from pipeline.dexnet.sampling import Candidates
+from pipeline.grasping.suction import SuctionModelConfig
 from pipeline.simulation.objects import create_body, cylinder, prism, regular_polygon
 
 T_DOWN = camera_pose_above_bin(0.55)
@@ -37,8 +41,9 @@ def _pixel(x: float, y: float, z: float) -> tuple[int, int]:
 
 def _upright_cylinder(client, radius=0.03, length=0.08, x=0.0):
     """A cylinder standing on z = 0, axis vertical, at (x, 0): top face at z = length."""
-    return create_body(client, cylinder(radius, length, 64), 400.0, 0.5, [x, 0.0, length / 2],
-                       [0, 0, 0, 1])
+    return create_body(
+        client, cylinder(radius, length, 64), 400.0, 0.5, [x, 0.0, length / 2], [0, 0, 0, 1]
+    )
 
 
 def test_convex_ray_cast_by_hand(client):
@@ -46,8 +51,9 @@ def test_convex_ray_cast_by_hand(client):
     (apothem 25 mm, 30 mm tall) beside it: 0.52 m; between them nothing (far)."""
     cyl = _upright_cylinder(client)
     square = prism(regular_polygon(4, 0.025 * np.sqrt(2)), 0.03)  # a 50 mm x 50 mm square
-    box = create_body(client, square, 400.0, 0.5, [0.1, 0.0, 0.015],
-                      p.getQuaternionFromEuler([0, 0, np.pi / 4]))
+    box = create_body(
+        client, square, 400.0, 0.5, [0.1, 0.0, 0.015], p.getQuaternionFromEuler([0, 0, np.pi / 4])
+    )
     depth, ids = raycast_convex(convex_from_pybullet(client), INTR, T_DOWN, 0.1, 2.0)
     u, v = _pixel(0.0, 0.0, 0.08)
     assert ids[v, u] == cyl and depth[v, u] == pytest.approx(0.47, abs=1e-6)
@@ -63,8 +69,9 @@ def test_convex_ray_cast_by_hand(client):
 def test_convex_ray_cast_equals_the_box_ray_cast(client, static_box):
     """Boxes drawn as convex solids give the slab test's image (within float32 rounding)."""
     static_box(client, [0.05, 0.03, 0.02], [0.0, 0.0, 0.02])
-    static_box(client, [0.04, 0.04, 0.01], [0.08, 0.05, 0.05],
-               p.getQuaternionFromEuler([0.3, -0.2, 0.7]))
+    static_box(
+        client, [0.04, 0.04, 0.01], [0.08, 0.05, 0.05], p.getQuaternionFromEuler([0.3, -0.2, 0.7])
+    )
     d_box, id_box = raycast_boxes(boxes_from_pybullet(client), INTR, T_DOWN, 0.1, 2.0)
     d_cvx, id_cvx = raycast_convex(convex_from_pybullet(client), INTR, T_DOWN, 0.1, 2.0)
     same = id_box == id_cvx
@@ -79,8 +86,14 @@ def test_convex_ray_cast_matches_tinyrenderer_on_meshes(client):
     """The rasteriser draws create_body's visual mesh, the same solid: the same body wherever
     both see one but at silhouette pixels, and the same depth within 0.1 mm inside."""
     _upright_cylinder(client, 0.03, 0.08, -0.05)
-    create_body(client, prism(regular_polygon(5, 0.04), 0.05), 400.0, 0.5, [0.06, 0.02, 0.03],
-                p.getQuaternionFromEuler([0.4, 0.2, 0.1]))
+    create_body(
+        client,
+        prism(regular_polygon(5, 0.04), 0.05),
+        400.0,
+        0.5,
+        [0.06, 0.02, 0.03],
+        p.getQuaternionFromEuler([0.4, 0.2, 0.1]),
+    )
     d_cvx, id_cvx = raycast_convex(convex_from_pybullet(client), INTR, T_DOWN, 0.1, 2.0)
     frame = render_depth(client, INTR, T_DOWN, 0.1, 2.0, renderer="tinyrenderer")
     seen = id_cvx >= 0
@@ -101,20 +114,28 @@ def test_labels_come_from_the_mesh_contact_model(client):
     from pipeline.dexnet.contact import perturbed_grasps
     from pipeline.dexnet.ood import label_candidates
 
-    floor_col = p.createCollisionShape(p.GEOM_BOX, halfExtents=[1, 1, 0.01],
-                                       physicsClientId=client)
-    floor = p.createMultiBody(0, floor_col, -1, basePosition=[0, 0, -0.01],
-                              physicsClientId=client)
+    floor_col = p.createCollisionShape(p.GEOM_BOX, halfExtents=[1, 1, 0.01], physicsClientId=client)
+    floor = p.createMultiBody(0, floor_col, -1, basePosition=[0, 0, -0.01], physicsClientId=client)
     body = _upright_cylinder(client)
     depth, ids = raycast_convex(convex_from_pybullet(client), INTR, T_DOWN, 0.1, 2.0)
     mask = (ids == body).astype(np.uint8)
     on, off = _pixel(0.0, 0.0, 0.08), _pixel(0.06, 0.0, 0.0)
     axis = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0]])  # straight down = camera +z
     point = np.array([[0.0, 0.0, 0.47], [0.06, 0.0, 0.55]])  # camera frame
-    cands = Candidates(uv=np.array([on, off]), point=point, axis=axis,
-                       depth=point[:, 2], angle=np.zeros(2))
-    quality, reason = label_candidates(client, [body], cands, depth, mask, INTR, T_DOWN,
-                                       default_config(SuctionModelConfig), np.random.default_rng(0))
+    cands = Candidates(
+        uv=np.array([on, off]), point=point, axis=axis, depth=point[:, 2], angle=np.zeros(2)
+    )
+    quality, reason = label_candidates(
+        client,
+        [body],
+        cands,
+        depth,
+        mask,
+        INTR,
+        T_DOWN,
+        default_config(SuctionModelConfig),
+        np.random.default_rng(0),
+    )
     assert [REASONS[r] for r in reason] == ["ok", "not_on_box"]
     cfg = default_config(SuctionModelConfig)
     _, axes = perturbed_grasps(point, axis, cfg, np.random.default_rng(0))  # as labelled
@@ -129,12 +150,24 @@ def test_labels_come_from_the_mesh_contact_model(client):
 def _small_cfg(*extra: str):
     """A composed config with a 160-px camera (same field of view: fx scaled by 160/416) and a
     border and crop window scaled to match, so that candidates exist on a small image."""
-    from pipeline.cli import compose
+    from pipeline.runtime.cli import compose
 
-    return compose("baseline", ["experiment=smoke", "camera.width=160", "camera.height=160",
-                                "camera.fx=158.35", "camera.fy=158.35", "camera.cx=79.5",
-                                "camera.cy=79.5", "dexnet.border_px=26",
-                                "dexnet.crop.window_px=24", "dexnet.crop.size=16", *extra])
+    return compose(
+        "baseline",
+        [
+            "experiment=smoke",
+            "camera.width=160",
+            "camera.height=160",
+            "camera.fx=158.35",
+            "camera.fy=158.35",
+            "camera.cx=79.5",
+            "camera.cy=79.5",
+            "dexnet.border_px=26",
+            "dexnet.crop.window_px=24",
+            "dexnet.crop.size=16",
+            *extra,
+        ],
+    )
 
 
 def test_one_object_heap_scene_builds_renders_and_labels():
@@ -166,9 +199,9 @@ def test_one_object_heap_scene_builds_renders_and_labels():
 
 
 def test_bad_ood_config_is_refused_before_any_work(tmp_path):
-    from pipeline.baseline import baseline
-    from pipeline.cli import compose
     from pipeline.dexnet.ood import check_ood_config
+    from pipeline.runtime.cli import compose
+    from pipeline.stages.baseline import baseline
 
     base = ["experiment=smoke", f"paths.root={tmp_path}", "logging.progress=false"]
     with pytest.raises(ValueError, match="objects.families"):
@@ -184,8 +217,8 @@ def test_bad_ood_config_is_refused_before_any_work(tmp_path):
 
 def test_ood_settings_are_in_the_version_only_with_the_variant():
     from pipeline.artifacts import stage_config
-    from pipeline.baseline import NOT_AFFECTING_RESULT, SECTIONS
-    from pipeline.cli import compose
+    from pipeline.runtime.cli import compose
+    from pipeline.stages.baseline import NOT_AFFECTING_RESULT, SECTIONS
 
     cfg = compose("baseline", ["experiment=smoke"])
     assert "gqcnn_ood" in cfg.baseline.variants
@@ -197,22 +230,32 @@ def test_baseline_stage_with_the_ood_variant_end_to_end(smoke_pipeline, tmp_path
     """The stage at a tiny scale: the object heaps' shards, the second GQ-CNN, its Table 2 row
     labelled with what it was trained on, the report's Table 2 showing it; a rerun reuses."""
     from pipeline.artifacts import load_manifest
-    from pipeline.baseline import baseline
     from pipeline.dataset.scenes import SceneDataset
     from pipeline.dexnet.planner import DexNetPlanner
     from pipeline.report.baseline import BaselineInfo, table2_table
+    from pipeline.stages.baseline import baseline
 
     smoke = smoke_pipeline.copy(tmp_path / "root", tops=("data",))  # its generation artifact
-    extra = ["baseline.train_version=none", "baseline.variants=[gqcnn_ood]",
-             "baseline.ood.num_scenes=3", "baseline.ood.num_val_scenes=1",
-             "baseline.ood.scenes_per_shard=2", "baseline.ood.candidates_per_scene=8",
-             "objects.max_count=8", "baseline.workers=1", "baseline.log_samples=1",
-             "baseline.epochs=1"]
+    extra = [
+        "baseline.train_version=none",
+        "baseline.variants=[gqcnn_ood]",
+        "baseline.ood.num_scenes=3",
+        "baseline.ood.num_val_scenes=1",
+        "baseline.ood.scenes_per_shard=2",
+        "baseline.ood.candidates_per_scene=8",
+        "objects.max_count=8",
+        "baseline.workers=1",
+        "baseline.log_samples=1",
+        "baseline.epochs=1",
+    ]
     cfg = smoke.cfg("baseline", *extra)
     out = baseline(cfg)
     m = load_manifest(out)
     assert sorted(p.name for p in (out / "ood").iterdir()) == [
-        "train-00000.npz", "train-00001.npz", "val-00000.npz"]
+        "train-00000.npz",
+        "train-00001.npz",
+        "val-00000.npz",
+    ]
     labels = m["metrics"]["ood_candidate_labels"]
     assert labels["train"]["scenes"] == 3 and labels["val"]["scenes"] == 1
     assert 0 < labels["train"]["candidates"] <= 24

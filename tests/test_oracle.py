@@ -10,13 +10,12 @@ import pytest
 
 
 def test_oracle_candidates_equal_the_labels(smoke_cfg):
-    from pipeline.labelling.scene import label_scene
+    from pipeline.grasping.types import GraspClass
     from pipeline.labelling.robot_check import RobotChecker
-    from pipeline.robot.model import robot_config
-    from pipeline.labelling.types import GraspClass
+    from pipeline.labelling.scene import label_scene
+    from pipeline.robot.model import Robot, robot_config
     from pipeline.world.cell import PickCell
     from pipeline.world.oracle import OraclePlanner
-    from pipeline.robot.model import Robot
 
     cfg = smoke_cfg("evaluate", "evaluate.boxes_per_trial=8")
     cell = PickCell(cfg, lambda: Robot(robot_config(cfg)))
@@ -27,13 +26,16 @@ def test_oracle_candidates_equal_the_labels(smoke_cfg):
         oracle = OraclePlanner(cfg, cell)
         cands = oracle.plan(obs, None)
         scene = oracle.scene(frame, cell.intrinsics)
-        rows, _, _, _ = label_scene(scene, cfg, RobotChecker(cfg), cfg.bin,
-                                    density=float(cfg.eval_boxes.density))
+        rows, _, _, _ = label_scene(
+            scene, cfg, RobotChecker(cfg), cfg.bin, density=float(cfg.eval_boxes.density)
+        )
     finally:
         cell.close()
     ok = rows["grasp_class"] != int(GraspClass.NG)
-    labels = {(round(float(u), 3), round(float(v), 3), int(c))
-              for (u, v), c in zip(rows["uv"][ok], rows["grasp_class"][ok])}
+    labels = {
+        (round(float(u), 3), round(float(v), 3), int(c))
+        for (u, v), c in zip(rows["uv"][ok], rows["grasp_class"][ok])
+    }
     got = {(round(c.u, 3), round(c.v, 3), int(GraspClass[c.pattern])) for c in cands}
     assert len(labels) >= 3
     assert got == labels

@@ -16,8 +16,8 @@ from types import SimpleNamespace
 import numpy as np
 import pybullet as p
 import pytest
-
 from conftest import default_config
+
 from pipeline.camera.geometry import project, world_to_camera
 from pipeline.controller.planning import Grasp
 
@@ -48,14 +48,18 @@ def _runner(cfg, name="test"):
 
 def _one_box_runner(smoke_cfg, name: str, size: list[float]):
     """A runner whose cell holds one box of ``size`` (m) flat at the bin centre, at rest."""
-    cfg = smoke_cfg("evaluate", "evaluate.boxes_per_trial=1",
-                    f"eval_boxes.types=[{{name: {name}, size: {list(size)}}}]")
+    cfg = smoke_cfg(
+        "evaluate",
+        "evaluate.boxes_per_trial=1",
+        f"eval_boxes.types=[{{name: {name}, size: {list(size)}}}]",
+    )
     r = _runner(cfg)
     cell = r.cell
     cell.reset(np.random.default_rng(0), 1)
     (body,) = list(cell.boxes)
-    p.resetBasePositionAndOrientation(body, [0, 0, size[2] / 2], [0, 0, 0, 1],
-                                      physicsClientId=cell.client)
+    p.resetBasePositionAndOrientation(
+        body, [0, 0, size[2] / 2], [0, 0, 0, 1], physicsClientId=cell.client
+    )
     cell.settle()
     return r
 
@@ -86,8 +90,7 @@ def _home(runner):
 
 
 def _grasp(obs, point_world, pattern="B", **kw):
-    u, v = project(world_to_camera(np.asarray(point_world, float), obs.T_world_cam),
-                   obs.intrinsics)
+    u, v = project(world_to_camera(np.asarray(point_world, float), obs.T_world_cam), obs.intrinsics)
     return Grasp(float(u), float(v), pattern, **kw)
 
 
@@ -96,8 +99,9 @@ def _check(runner, obs, grasp, pattern):
     ctrl = runner.robot_side
     ctrl.checker.update(obs)
     feats, _ = ctrl.home_surface(obs, grasp, [grasp])
-    return ctrl.checker.check(obs, feats, feats.center_cam, pattern, (grasp.u, grasp.v),
-                              hand_fit=True)
+    return ctrl.checker.check(
+        obs, feats, feats.center_cam, pattern, (grasp.u, grasp.v), hand_fit=True
+    )
 
 
 def _select(runner, obs, grasps):
@@ -129,12 +133,16 @@ def test_a_reachable_target_is_chosen_and_a_rejected_one_never(runner):
     # the labels on that image hold a grasp the check passes (the box's top face): the planner's
     # perception lost the box, not execution (evaluate.label_no_grasp)
     assert trial.no_grasp["label_candidates"] == 1 and trial.no_grasp["label_executable"]
-    assert {k: trial.no_grasp[k] for k in ("boxes_left", "candidates", "checked")} == \
-        {"boxes_left": 1, "candidates": 1, "checked": 1}
+    assert {k: trial.no_grasp[k] for k in ("boxes_left", "candidates", "checked")} == {
+        "boxes_left": 1,
+        "candidates": 1,
+        "checked": 1,
+    }
     assert trial.final_home == {}  # kept only with the trace (evaluate.log_trials)
     runner.plans.append([bad])
-    traced = runner.run_trial(0, np.random.default_rng(0), np.random.default_rng(1),
-                              keep_trace=True)
+    traced = runner.run_trial(
+        0, np.random.default_rng(0), np.random.default_rng(1), keep_trace=True
+    )
     home = traced.final_home
     assert home["depth_m"].shape == obs.depth_m.shape
     np.testing.assert_allclose(home["T_world_cam"], obs.T_world_cam, atol=1e-3)  # home, by IK
@@ -174,8 +182,9 @@ def _fail(runner, obs, grasp, pattern, outcome="dropped"):
 
 
 def _move(runner, body, position):
-    p.resetBasePositionAndOrientation(body, position, [0, 0, 0, 1],
-                                      physicsClientId=runner.cell.client)
+    p.resetBasePositionAndOrientation(
+        body, position, [0, 0, 0, 1], physicsClientId=runner.cell.client
+    )
 
 
 def test_a_retry_after_a_failure_differs(runner):
@@ -205,8 +214,9 @@ def _add_cube(runner, xy):
     cell = runner.cell
     shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=[0.03] * 3, physicsClientId=cell.client)
     visual = p.createVisualShape(p.GEOM_BOX, halfExtents=[0.03] * 3, physicsClientId=cell.client)
-    body = p.createMultiBody(0.1, shape, visual, basePosition=[xy[0], xy[1], 0.03],
-                             physicsClientId=cell.client)
+    body = p.createMultiBody(
+        0.1, shape, visual, basePosition=[xy[0], xy[1], 0.03], physicsClientId=cell.client
+    )
     cell.boxes[body] = {"type": "cube", "size": np.array([0.06, 0.06, 0.06]), "mass": 0.1}
     return body
 
@@ -305,11 +315,17 @@ def test_dexnet_alternatives_follow_the_best_by_quality():
 
     uv = np.array([[10, 10], [20, 20], [30, 30], [20, 20], [40, 40]])
     n = len(uv)
-    c = Candidates(uv=uv, point=np.zeros((n, 3)), axis=np.tile([0, 0, 1.0], (n, 1)),
-                   depth=np.ones(n), angle=np.zeros(n))
+    c = Candidates(
+        uv=uv,
+        point=np.zeros((n, 3)),
+        axis=np.tile([0, 0, 1.0], (n, 1)),
+        depth=np.ones(n),
+        angle=np.zeros(n),
+    )
     scores = np.array([0.9, 0.5, 0.7, 0.5, -np.inf])
-    result = CEMResult(best=c.take([0]), best_score=0.9,
-                       iterations=[CEMIteration(c, scores, np.array([0]))])
+    result = CEMResult(
+        best=c.take([0]), best_score=0.9, iterations=[CEMIteration(c, scores, np.array([0]))]
+    )
     assert [(g.u, g.v) for g in grasps_of(result)] == [(10, 10)]
     got = [(g.u, g.v, g.score) for g in grasps_of(result, 10)]
     assert got == [(10, 10, 0.9), (30, 30, 0.7), (20, 20, 0.5)]
@@ -344,9 +360,12 @@ def test_servo_turns_to_a_reference_axis_by_hand():
 def _level_face(z=0.5):
     """A level face straight ahead of the home camera: centre (0, 0, z), normal towards it."""
     return np.array([0.0, 0.0, z]), SimpleNamespace(
-        normal_cam=np.array([0.0, 0.0, -1.0]), long_axis_cam=np.array([1.0, 0, 0]),
-        short_axis_cam=np.array([0, 1.0, 0]), warped_long=np.array([1.0, 0, 0]),
-        warped_short=np.array([0, 1.0, 0]))
+        normal_cam=np.array([0.0, 0.0, -1.0]),
+        long_axis_cam=np.array([1.0, 0, 0]),
+        short_axis_cam=np.array([0, 1.0, 0]),
+        warped_long=np.array([1.0, 0, 0]),
+        warped_short=np.array([0, 1.0, 0]),
+    )
 
 
 def _first_goal(runner, centre, feats, pattern, T_home):
@@ -356,8 +375,16 @@ def _first_goal(runner, centre, feats, pattern, T_home):
     from pipeline.robot.approach import first_goal
 
     ctrl = runner.robot_side
-    return first_goal(ctrl.servo_cfg, runner.cfg, T_home, centre, feats.normal_cam,
-                      paper_x_axis(feats), pattern, runner.cell.intrinsics)
+    return first_goal(
+        ctrl.servo_cfg,
+        runner.cfg,
+        T_home,
+        centre,
+        feats.normal_cam,
+        paper_x_axis(feats),
+        pattern,
+        runner.cell.intrinsics,
+    )
 
 
 def test_lifted_goal_by_hand(runner):
@@ -393,7 +420,8 @@ def test_first_goal_is_a_via_point(runner):
         runner.cfg.motion.approach = approach
         cfg, _ = _first_goal(runner, centre, feats, "B", T_home)
         assert (cfg.tolerance_xy, cfg.tolerance_log_z, cfg.tolerance_rot_deg) == pytest.approx(
-            (2 * final.tolerance_xy, 2 * final.tolerance_log_z, 2 * final.tolerance_rot_deg))
+            (2 * final.tolerance_xy, 2 * final.tolerance_log_z, 2 * final.tolerance_rot_deg)
+        )
     runner.cfg.motion.via_tolerance_scale = 0.5
     with pytest.raises(ValueError, match="via_tolerance_scale"):
         _first_goal(runner, centre, feats, "B", T_home)
@@ -406,9 +434,13 @@ def test_lift_is_cut_to_keep_a_steep_face_in_view(runner):
     T_home = runner.cell.robot.home_camera_pose()
     t = np.radians(60)
     normal = np.array([0.0, np.sin(t), -np.cos(t)])  # towards the camera (normal · centre < 0)
-    feats = SimpleNamespace(normal_cam=normal, long_axis_cam=np.array([1.0, 0, 0]),
-                            short_axis_cam=np.cross(normal, [1.0, 0, 0]),
-                            warped_long=np.array([1.0, 0, 0]), warped_short=np.array([0, 1.0, 0]))
+    feats = SimpleNamespace(
+        normal_cam=normal,
+        long_axis_cam=np.array([1.0, 0, 0]),
+        short_axis_cam=np.cross(normal, [1.0, 0, 0]),
+        warped_long=np.array([1.0, 0, 0]),
+        warped_short=np.array([0, 1.0, 0]),
+    )
     runner.cfg.motion.approach = "lift"
     cfg, d = _first_goal(runner, np.array([0.0, 0.0, 0.5]), feats, "B", T_home)
     assert 0.15 < d < 0.30
@@ -421,13 +453,17 @@ def test_lift_is_cut_to_keep_a_steep_face_in_view(runner):
 def two_boxes(smoke_cfg):
     """Two medium boxes (145 × 92 × 52 mm) lying flat side by side, touching along y = 0: their
     top faces are coplanar at z = 52 mm, centred at (0, ±0.046, 0.052)."""
-    cfg = smoke_cfg("evaluate", "evaluate.boxes_per_trial=2",
-                    "eval_boxes.types=[{name: medium, size: [0.145, 0.092, 0.052]}]")
+    cfg = smoke_cfg(
+        "evaluate",
+        "evaluate.boxes_per_trial=2",
+        "eval_boxes.types=[{name: medium, size: [0.145, 0.092, 0.052]}]",
+    )
     r = _runner(cfg)
     r.cell.reset(np.random.default_rng(0), 2)
     for body, y in zip(r.cell.boxes, (-0.046, 0.046)):
-        p.resetBasePositionAndOrientation(body, [0, y, 0.026], [0, 0, 0, 1],
-                                          physicsClientId=r.cell.client)
+        p.resetBasePositionAndOrientation(
+            body, [0, y, 0.026], [0, 0, 0, 1], physicsClientId=r.cell.client
+        )
     yield r
     _close(r)
 
@@ -479,20 +515,31 @@ def test_pattern_fits_by_the_hand_level_rule(smoke_cfg):
 
     hand = smoke_cfg("evaluate").hand
     face = dict(long_length=0.145, short_length=0.052, area=0.145 * 0.052)
-    x_long = SimpleNamespace(**face, warped_long=np.array([1.0, 0, 0]),
-                             warped_short=np.array([0, 1.0, 0]))
-    x_short = SimpleNamespace(**face, warped_long=np.array([0, 1.0, 0]),
-                              warped_short=np.array([1.0, 0, 0]))
+    x_long = SimpleNamespace(
+        **face, warped_long=np.array([1.0, 0, 0]), warped_short=np.array([0, 1.0, 0])
+    )
+    x_short = SimpleNamespace(
+        **face, warped_long=np.array([0, 1.0, 0]), warped_short=np.array([1.0, 0, 0])
+    )
     assert not pattern_fits(x_long, "B", hand)
     assert pattern_fits(x_long, "L", hand) and pattern_fits(x_long, "R", hand)
     assert pattern_fits(x_short, "B", hand)
-    square = SimpleNamespace(long_length=0.09, short_length=0.09, area=0.0081,
-                             warped_long=np.array([1.0, 0, 0]), warped_short=np.array([0, 1.0, 0]))
+    square = SimpleNamespace(
+        long_length=0.09,
+        short_length=0.09,
+        area=0.0081,
+        warped_long=np.array([1.0, 0, 0]),
+        warped_short=np.array([0, 1.0, 0]),
+    )
     assert pattern_fits(square, "B", hand)
     assert not pattern_fits(SimpleNamespace(**{**vars(square), "short_length": 0.087}), "B", hand)
     # a 25 mm square: one cup fits (9 mm ≤ 12.5 mm) if the area is at least 305.4 mm²
-    small = dict(long_length=0.025, short_length=0.025, warped_long=np.array([1.0, 0, 0]),
-                 warped_short=np.array([0, 1.0, 0]))
+    small = dict(
+        long_length=0.025,
+        short_length=0.025,
+        warped_long=np.array([1.0, 0, 0]),
+        warped_short=np.array([0, 1.0, 0]),
+    )
     assert pattern_fits(SimpleNamespace(**small, area=0.000625), "L", hand)
     assert not pattern_fits(SimpleNamespace(**small, area=0.0003), "L", hand)
     assert not pattern_fits(SimpleNamespace(**small, area=0.000625), "B", hand)

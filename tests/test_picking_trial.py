@@ -41,14 +41,19 @@ def test_one_short_pick_succeeds(smoke_cfg):
     from pipeline.world.cell import PickCell
     from pipeline.world.trial import TrialRunner
 
-    cfg = smoke_cfg("evaluate", "evaluate.boxes_per_trial=1", "eval_boxes=warehouse",
-                    "eval_boxes.types=[{name: medium, size: [0.145, 0.092, 0.052]}]")
+    cfg = smoke_cfg(
+        "evaluate",
+        "evaluate.boxes_per_trial=1",
+        "eval_boxes=warehouse",
+        "eval_boxes.types=[{name: medium, size: [0.145, 0.092, 0.052]}]",
+    )
     cell = PickCell(cfg, lambda: Robot(robot_config(cfg)))
     robot_side = RobotController(cfg, _Oracle(cell), "oracle")
     try:
         runner = TrialRunner(cfg, cell, robot_side, "oracle")
-        result = runner.run_trial(0, np.random.default_rng(0), np.random.default_rng(1),
-                                  keep_trace=True)
+        result = runner.run_trial(
+            0, np.random.default_rng(0), np.random.default_rng(1), keep_trace=True
+        )
     finally:
         cell.close()
         robot_side.close()
@@ -64,11 +69,16 @@ def test_one_short_pick_succeeds(smoke_cfg):
 
 def test_evaluate_stage_writes_table3(smoke_cfg):
     from pipeline.artifacts import load_manifest, verify_artifact
-    from pipeline.evaluate import evaluate
+    from pipeline.stages.evaluate import evaluate
 
-    cfg = smoke_cfg("evaluate", "planner=dexnet", "evaluate.dexnet_variant=planarity",
-                    "evaluate.boxes_per_trial=1", "evaluate.max_attempts_per_trial=2",
-                    "evaluate.workers=1")
+    cfg = smoke_cfg(
+        "evaluate",
+        "planner=dexnet",
+        "evaluate.dexnet_variant=planarity",
+        "evaluate.boxes_per_trial=1",
+        "evaluate.max_attempts_per_trial=2",
+        "evaluate.workers=1",
+    )
     out = evaluate(cfg)
     assert verify_artifact(out) == []
     m = load_manifest(out)
@@ -84,7 +94,7 @@ def test_evaluate_stage_writes_table3(smoke_cfg):
 
 
 def test_evaluate_rejects_unknown_planner(smoke_cfg):
-    from pipeline.evaluate import evaluate
+    from pipeline.stages.evaluate import evaluate
 
     cfg = smoke_cfg("evaluate", "evaluate.planners=[dcnn,magic]")
     with pytest.raises(ValueError, match="unknown planner 'magic'"):
@@ -109,7 +119,7 @@ def test_the_example_plugin_runs_a_short_closed_loop(smoke_cfg, monkeypatch):
     imported from the repository's root; it picks in the smoke trial and its row is Table 3's."""
     from pathlib import Path
 
-    from pipeline.evaluate import evaluate
+    from pipeline.stages.evaluate import evaluate
 
     root = Path(__file__).resolve().parents[1]
     monkeypatch.chdir(root)
@@ -128,24 +138,38 @@ def test_a_no_grasp_end_logs_its_home_image(tmp_path):
     from mcap_protobuf.decoder import DecoderFactory
 
     from pipeline.camera.geometry import Intrinsics
-    from pipeline.evaluate import _log_trials
-    from pipeline.world.trial import TrialResult
+    from pipeline.stages.evaluate import log_trials
     from pipeline.tracking import StageLog
+    from pipeline.world.trial import TrialResult
 
     intr = Intrinsics(width=8, height=6, fx=10.0, fy=10.0, cx=3.5, cy=2.5)
     depth = np.full((6, 8), 0.5, np.float32)
-    home = {"depth_m": depth, "T_world_cam": np.eye(4), "candidates_px": np.array([[3.5, 2.5]]),
-            "boxes_left": [{"body": 7, "type": "cube", "position": np.array([0.1, -0.2, 0.03])}]}
-    result = TrialResult(trial=3, planner="dcnn", boxes=12, picked=11, end="no_grasp",
-                         attempts=[], no_grasp={"boxes_left": 1, "candidates": 1, "checked": 1,
-                                                "rejected": {"collision": 1}},
-                         final_home=home)
+    home = {
+        "depth_m": depth,
+        "T_world_cam": np.eye(4),
+        "candidates_px": np.array([[3.5, 2.5]]),
+        "boxes_left": [{"body": 7, "type": "cube", "position": np.array([0.1, -0.2, 0.03])}],
+    }
+    result = TrialResult(
+        trial=3,
+        planner="dcnn",
+        boxes=12,
+        picked=11,
+        end="no_grasp",
+        attempts=[],
+        no_grasp={"boxes_left": 1, "candidates": 1, "checked": 1, "rejected": {"collision": 1}},
+        final_home=home,
+    )
     with StageLog(tmp_path, "evaluate", "rec") as log:
-        _log_trials(log, [result], intr)
+        log_trials(log, [result], intr)
     prefix = "/trials/dcnn/trial_3/no_grasp"
     with open(tmp_path / "log.mcap", "rb") as f:
-        msgs = {ch.topic: dec for _, ch, _, dec in
-                make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages()}
+        msgs = {
+            ch.topic: dec
+            for _, ch, _, dec in make_reader(
+                f, decoder_factories=[DecoderFactory()]
+            ).iter_decoded_messages()
+        }
     img = msgs[f"{prefix}/depth"]
     assert (img.width, img.height, img.frame_id) == (8, 6, "no_grasp_camera")
     np.testing.assert_array_equal(np.frombuffer(img.data, "<f4").reshape(6, 8), depth)

@@ -13,11 +13,18 @@ import math
 import numpy as np
 import pytest
 import torch
-
 from conftest import default_config
-from pipeline.labelling.types import GraspClass
-from pipeline.planner import (GraspNet, LossConfig, NetworkConfig, encode, focal_terms, grasp_loss,
-                              stack_targets)
+
+from pipeline.grasping.types import GraspClass
+from pipeline.planner import (
+    GraspNet,
+    LossConfig,
+    NetworkConfig,
+    encode,
+    focal_terms,
+    grasp_loss,
+    stack_targets,
+)
 
 R, L, B, NG = (int(c) for c in GraspClass)
 POS0 = 0.25 * 0.25 * math.log(2)  # 0.0433217
@@ -43,10 +50,10 @@ def test_focal_terms_by_hand():
     x = torch.tensor([0.0, 0.0, math.log(3.0), math.log(3.0)])  # p = 0.5, 0.5, 0.75, 0.75
     t = torch.tensor([1.0, 0.0, 1.0, 0.0])
     expected = [
-        POS0,                                      # 0.0433217
-        NEG0,                                      # 0.1299651
-        0.25 * 0.25 ** 2 * -math.log(0.75),        # −α (0.25)² ln 0.75 = 0.0044950
-        0.75 * 0.75 ** 2 * -math.log(0.25),        # −(1 − α) (0.75)² ln 0.25 = 0.5848430
+        POS0,  # 0.0433217
+        NEG0,  # 0.1299651
+        0.25 * 0.25**2 * -math.log(0.75),  # −α (0.25)² ln 0.75 = 0.0044950
+        0.75 * 0.75**2 * -math.log(0.25),  # −(1 − α) (0.75)² ln 0.25 = 0.5848430
     ]
     np.testing.assert_allclose(focal_terms(x, t, 0.25, 2.0).numpy(), expected, rtol=1e-6)
 
@@ -109,10 +116,12 @@ def test_loss_with_network_and_encoded_targets_trains():
     torch.manual_seed(0)
     net = GraspNet(default_config(NetworkConfig, width=1 / 32))
     depth = torch.rand(2, 1, 416, 416)
-    t = stack_targets([
-        encode(np.array([[16.0, 16.0], [200.0, 100.0], [300.0, 380.0]]), np.array([B, L, NG])),
-        encode(np.zeros((0, 2)), np.zeros(0)),
-    ])
+    t = stack_targets(
+        [
+            encode(np.array([[16.0, 16.0], [200.0, 100.0], [300.0, 380.0]]), np.array([B, L, NG])),
+            encode(np.zeros((0, 2)), np.zeros(0)),
+        ]
+    )
     opt = torch.optim.Adam(net.parameters(), lr=1e-2)
     history = []
     for _ in range(8):

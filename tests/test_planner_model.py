@@ -7,13 +7,20 @@ import math
 import numpy as np
 import pytest
 import torch
+from conftest import default_config
 from torch import nn
 
-from conftest import default_config
-from pipeline.labelling.types import GraspClass
+from pipeline.grasping.types import GraspClass
 from pipeline.planner import (
-    EMPTY, GraspNet, NetworkConfig, conv_layers, count_flops, count_parameters, decode_output,
-    decode_points, encode,
+    EMPTY,
+    GraspNet,
+    NetworkConfig,
+    conv_layers,
+    count_flops,
+    count_parameters,
+    decode_output,
+    decode_points,
+    encode,
 )
 from pipeline.planner.decode import second_chance
 from pipeline.planner.network import ConvBlock
@@ -23,15 +30,28 @@ R, L, B, NG = (int(c) for c in GraspClass)
 # Width 1/32: every Darknet width divides exactly (32 → 1, 64 → 2, ..., 1024 → 32).
 # (c_in, c_out, kernel, output side in pixels) of the 22 conv-BN-leaky layers, in forward order.
 TINY_BLOCKS = [
-    (1, 1, 3, 416),                                                   # pool → 208
-    (1, 2, 3, 208),                                                   # pool → 104
-    (2, 4, 3, 104), (4, 2, 1, 104), (2, 4, 3, 104),                   # pool → 52
-    (4, 8, 3, 52), (8, 4, 1, 52), (4, 8, 3, 52),                      # pool → 26
-    (8, 16, 3, 26), (16, 8, 1, 26), (8, 16, 3, 26), (16, 8, 1, 26), (8, 16, 3, 26),  # pool → 13
-    (16, 32, 3, 13), (32, 16, 1, 13), (16, 32, 3, 13), (32, 16, 1, 13), (16, 32, 3, 13),
-    (32, 32, 3, 13), (32, 32, 3, 13),                                 # head
-    (16, 2, 1, 26),                                                   # passthrough (stride 16)
-    (32 + 4 * 2, 32, 3, 13),                                          # after space-to-depth concat
+    (1, 1, 3, 416),  # pool → 208
+    (1, 2, 3, 208),  # pool → 104
+    (2, 4, 3, 104),
+    (4, 2, 1, 104),
+    (2, 4, 3, 104),  # pool → 52
+    (4, 8, 3, 52),
+    (8, 4, 1, 52),
+    (4, 8, 3, 52),  # pool → 26
+    (8, 16, 3, 26),
+    (16, 8, 1, 26),
+    (8, 16, 3, 26),
+    (16, 8, 1, 26),
+    (8, 16, 3, 26),  # pool → 13
+    (16, 32, 3, 13),
+    (32, 16, 1, 13),
+    (16, 32, 3, 13),
+    (32, 16, 1, 13),
+    (16, 32, 3, 13),
+    (32, 32, 3, 13),
+    (32, 32, 3, 13),  # head
+    (16, 2, 1, 26),  # passthrough (stride 16)
+    (32 + 4 * 2, 32, 3, 13),  # after space-to-depth concat
 ]
 TINY_OUT = (32, 6, 1, 13)  # the linear output conv, with bias
 
@@ -86,7 +106,7 @@ def test_parameter_and_mac_counts_by_hand():
     params += c_in * c_out + c_out  # 1×1 conv + bias
     assert count_parameters(net) == params == 50175
     macs = sum(kk * kk * ci * co * s * s for ci, co, kk, s in TINY_BLOCKS)
-    macs += c_in * c_out * side ** 2
+    macs += c_in * c_out * side**2
     assert count_flops(net) == macs == 15_758_912
 
 
@@ -96,8 +116,11 @@ def test_flops_match_measured_output_sizes():
     net = GraspNet(default_config(NetworkConfig, width=0.25)).eval()
     measured = []
     for conv in conv_layers(net):
-        conv.register_forward_hook(lambda m, i, o: measured.append(
-            m.kernel_size[0] * m.kernel_size[1] * m.in_channels * o[0].numel()))
+        conv.register_forward_hook(
+            lambda m, i, o: measured.append(
+                m.kernel_size[0] * m.kernel_size[1] * m.in_channels * o[0].numel()
+            )
+        )
     with torch.no_grad():
         net(torch.zeros(1, 1, 416, 416))
     assert len(measured) == 23 and sum(measured) == count_flops(net)
@@ -205,7 +228,9 @@ def test_second_chance_by_hand():
     out = second_chance(preds, threshold=0.5, fallback_threshold=0.25)
     # (2, 3) is Eq. 3's own; (10, 10)'s best class other than NG, L at 0.119, is below 0.25.
     assert [(p.u, p.v, p.grasp_class) for p in out] == [
-        (5.5 * 32, 5.5 * 32, GraspClass.L), (1.5 * 32, 8.5 * 32, GraspClass.R)]
+        (5.5 * 32, 5.5 * 32, GraspClass.L),
+        (1.5 * 32, 8.5 * 32, GraspClass.R),
+    ]
     assert [p.probability for p in out] == pytest.approx([0.5, 0.377541], abs=1e-6)
     # the cell's own probabilities are kept (NG's included)
     assert out[0].class_probs[NG] == pytest.approx(0.880797, abs=1e-6)
@@ -233,13 +258,19 @@ def test_plan_fallback_tier_follows_eq3_candidates(monkeypatch):
     assert [(c.u, c.v, c.grasp_class) for c in plain] == [(112.0, 80.0, GraspClass.B)]
     both = planner.plan(depth, intr, fallback_threshold=0.25)
     assert [(c.u, c.v, c.grasp_class) for c in both] == [
-        (112.0, 80.0, GraspClass.B), (48.0, 272.0, GraspClass.R), (176.0, 176.0, GraspClass.L)]
-    assert [c.score for c in both] == pytest.approx([1 - 0.6 / 0.645, 1 - 0.5 / 0.645,
-                                                     1 - 0.6 / 0.645], abs=1e-6)
+        (112.0, 80.0, GraspClass.B),
+        (48.0, 272.0, GraspClass.R),
+        (176.0, 176.0, GraspClass.L),
+    ]
+    assert [c.score for c in both] == pytest.approx(
+        [1 - 0.6 / 0.645, 1 - 0.5 / 0.645, 1 - 0.6 / 0.645], abs=1e-6
+    )
     same = planner.plan(depth, intr, fallback_threshold=0.5)  # not below th: off
     assert [(c.u, c.v, c.grasp_class) for c in same] == [(112.0, 80.0, GraspClass.B)]
     # Only second-tier cells: Eq. 3 alone proposes nothing, the tier does.
     raw[2 + B, 2, 3] = -10.0
     assert planner.plan(depth, intr) == [] and planner.last_reason == "no_prediction"
     assert [c.grasp_class for c in planner.plan(depth, intr, fallback_threshold=0.25)] == [
-        GraspClass.R, GraspClass.L] and planner.last_reason == ""
+        GraspClass.R,
+        GraspClass.L,
+    ] and planner.last_reason == ""

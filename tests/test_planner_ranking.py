@@ -12,10 +12,10 @@ import math
 
 import numpy as np
 import pytest
-
 from conftest import default_config
+
 from pipeline.camera.geometry import Intrinsics
-from pipeline.labelling.types import GraspClass
+from pipeline.grasping.types import GraspClass
 from pipeline.planner import GraspPrediction, RankingConfig, graspability, rank_grasps
 
 SR300 = Intrinsics(416, 416, 411.7, 411.7, 207.5, 207.5)
@@ -30,8 +30,9 @@ def plane(z0: float, tilt_deg: float = 0.0) -> np.ndarray:
 
 
 def pred(u, v, cls=GraspClass.B, p=0.9) -> GraspPrediction:
-    return GraspPrediction(u=u, v=v, grasp_class=GraspClass(cls), probability=p,
-                           class_probs=np.full(4, p, np.float32))
+    return GraspPrediction(
+        u=u, v=v, grasp_class=GraspClass(cls), probability=p, class_probs=np.full(4, p, np.float32)
+    )
 
 
 def test_level_plane_uses_distance():
@@ -65,22 +66,32 @@ def test_switch_at_30_degrees():
 
 
 def test_ordering_on_four_bands():
-    depth = np.concatenate([plane(0.6)[:104], plane(0.4)[104:208],
-                            plane(0.5, 45)[208:312], plane(0.5, 60)[312:]])
-    preds = [pred(200.0, 50.0, GraspClass.B), pred(200.0, 150.0, GraspClass.L),
-             pred(200.0, 260.0, GraspClass.R), pred(200.0, 360.0, GraspClass.B)]
+    depth = np.concatenate(
+        [plane(0.6)[:104], plane(0.4)[104:208], plane(0.5, 45)[208:312], plane(0.5, 60)[312:]]
+    )
+    preds = [
+        pred(200.0, 50.0, GraspClass.B),
+        pred(200.0, 150.0, GraspClass.L),
+        pred(200.0, 260.0, GraspClass.R),
+        pred(200.0, 360.0, GraspClass.B),
+    ]
     ranked = rank_grasps(preds, depth, SR300, CFG)
     # J: level 0.6 → 1 − 0.6/0.645 = 0.069767; level 0.4 → 0.379845;
     #    45° → 1 − 2 (π/4)/π = 0.5; 60° → 1 − 2 (π/3)/π = 0.333333.
     assert [c.v for c in ranked] == [260.0, 150.0, 360.0, 50.0]
-    np.testing.assert_allclose([c.score for c in ranked], [0.5, 0.379845, 1 / 3, 0.069767],
-                               atol=1e-4)
+    np.testing.assert_allclose(
+        [c.score for c in ranked], [0.5, 0.379845, 1 / 3, 0.069767], atol=1e-4
+    )
     assert ranked[0].grasp_class == GraspClass.R  # G_opt
 
 
 def test_ng_and_low_probability_are_removed():
-    preds = [pred(100.0, 100.0, GraspClass.NG, 0.99), pred(150.0, 100.0, GraspClass.B, 0.5),
-             pred(200.0, 100.0, GraspClass.L, 0.3), pred(250.0, 100.0, GraspClass.R, 0.51)]
+    preds = [
+        pred(100.0, 100.0, GraspClass.NG, 0.99),
+        pred(150.0, 100.0, GraspClass.B, 0.5),
+        pred(200.0, 100.0, GraspClass.L, 0.3),
+        pred(250.0, 100.0, GraspClass.R, 0.51),
+    ]
     ranked = rank_grasps(preds, plane(0.5), SR300, CFG)
     assert [(c.u, c.grasp_class) for c in ranked] == [(250.0, GraspClass.R)]  # S > th, strictly
 
@@ -90,8 +101,9 @@ def test_missing_depth_and_edges():
     depth[:, 210:] = 0.45  # a 5 cm step at u = 210
     depth[100:140, 100:140] = 0.0  # a hole
     depth[300, 300] = 0.0  # a single dead pixel
-    ranked = rank_grasps([pred(120.0, 120.0), pred(300.0, 300.0), pred(208.0, 300.0)],
-                         depth, SR300, CFG)
+    ranked = rank_grasps(
+        [pred(120.0, 120.0), pred(300.0, 300.0), pred(208.0, 300.0)], depth, SR300, CFG
+    )
     by_u = {c.u: c for c in ranked}
     assert 120.0 not in by_u  # no data in its window: dropped
     assert by_u[300.0].depth == pytest.approx(0.45)  # median of the window

@@ -25,20 +25,20 @@ from omegaconf import OmegaConf
 
 from pipeline.camera.geometry import Intrinsics, camera_pose_above_bin
 from pipeline.camera.raycast import (
-    UnsupportedGeometry, boxes_from_pybullet, fill_ground, raycast_boxes,
+    UnsupportedGeometry,
+    boxes_from_pybullet,
+    fill_ground,
+    raycast_boxes,
 )
 from pipeline.camera.render import render_depth
-from pipeline.cli import compose
 from pipeline.cell.bin import build_cell
+from pipeline.runtime.cli import compose
 from pipeline.simulation.heap import drop_heap
 from pipeline.simulation.views import closeup_poses
 
 SR300 = Intrinsics(416, 416, 411.7, 411.7, 207.5, 207.5)
 EDGE_TIE_PX = 1e-3
 DEPTH_TOL_M = 1e-4  # the issue's 0.1 mm
-
-
-
 
 
 # ------------------------------------------------------------------------ hand-worked cases
@@ -49,8 +49,7 @@ def test_near_plane_clips_pixel_by_pixel(client, static_box):
     0.3 − 0.15 = 0.15 m. Rays past the cube see the floor at 0.3 m."""
     floor = static_box(client, [0.5, 0.5, 0.01], [0, 0, -0.01])
     cube = static_box(client, [0.05, 0.05, 0.05], [0, 0, 0.2])
-    frame = render_depth(client, SR300, camera_pose_above_bin(0.3), 0.1, 2.0,
-                         renderer="raycast")
+    frame = render_depth(client, SR300, camera_pose_above_bin(0.3), 0.1, 2.0, renderer="raycast")
     assert frame.body_ids[208, 208] == cube
     assert frame.depth_m[208, 208] == pytest.approx(0.15, abs=1e-6)
     # Along row v = 208 (y ≈ 0) a ray x = xn·z is inside the cube at the near plane while
@@ -126,8 +125,7 @@ def test_box_reaching_behind_the_camera(client, static_box):
     pixel is tested. Pixel u = 407 (xn = 199.5/411.7) meets the wall's face x = 0.05 at
     z = 0.05/xn = 0.10318 m, beyond the near plane; pixel u = 207 (xn < 0) never meets it."""
     wall = static_box(client, [0.5, 1.0, 0.75], [0.55, 0, -0.25])
-    frame = render_depth(client, SR300, camera_pose_above_bin(0.12), 0.1, 2.0,
-                         renderer="raycast")
+    frame = render_depth(client, SR300, camera_pose_above_bin(0.12), 0.1, 2.0, renderer="raycast")
     assert frame.body_ids[208, 407] == wall
     assert frame.depth_m[208, 407] == pytest.approx(0.05 * 411.7 / 199.5, abs=1e-6)
     assert frame.body_ids[208, 207] == -1
@@ -159,8 +157,15 @@ def classify(tiny, ray, boxes, bin_ids, T, intr, near, far, ground_id) -> dict[s
     ties excepted)."""
     by_id = {b.body_id: b for b in boxes}
     near_ids = {i for i, b in by_id.items() if _crosses_near(b, T, near)}
-    out = {"pixels": tiny.body_ids.size, "bin_tie": 0, "edge_tie": 0, "depth_edge_tie": 0,
-           "crack": 0, "near_plane": 0, "unexplained": []}
+    out = {
+        "pixels": tiny.body_ids.size,
+        "bin_tie": 0,
+        "edge_tie": 0,
+        "depth_edge_tie": 0,
+        "crack": 0,
+        "near_plane": 0,
+        "unexplained": [],
+    }
     H, W = tiny.body_ids.shape
     for v, u in zip(*np.nonzero(tiny.body_ids != ray.body_ids)):
         a, b = int(tiny.body_ids[v, u]), int(ray.body_ids[v, u])
@@ -171,8 +176,11 @@ def classify(tiny, ray, boxes, bin_ids, T, intr, near, far, ground_id) -> dict[s
         if a in bin_ids and b in bin_ids and abs(da - db) < DEPTH_TOL_M:
             out["bin_tie"] += 1
             continue
-        nb = [tiny.body_ids[y, x] for y, x in ((v - 1, u), (v + 1, u), (v, u - 1), (v, u + 1))
-              if 0 <= y < H and 0 <= x < W]
+        nb = [
+            tiny.body_ids[y, x]
+            for y, x in ((v - 1, u), (v + 1, u), (v, u - 1), (v, u + 1))
+            if 0 <= y < H and 0 <= x < W
+        ]
         if da > db and len(nb) == 4 and all(n == b for n in nb):
             out["crack"] += 1
             continue
@@ -197,12 +205,20 @@ def classify(tiny, ray, boxes, bin_ids, T, intr, near, far, ground_id) -> dict[s
     shifted = None
     for v, u in zip(*np.nonzero(same & (diff >= DEPTH_TOL_M))):
         if shifted is None:
-            shifted = [raycast_boxes(boxes, dataclasses.replace(intr, cx=intr.cx - du,
-                                                                cy=intr.cy - dv), T, near, far)
-                       for du, dv in ((EDGE_TIE_PX, 0), (-EDGE_TIE_PX, 0), (0, EDGE_TIE_PX),
-                                      (0, -EDGE_TIE_PX))]
-        seen = [float(ray.depth_m[v, u])] + [float(d[v, u]) for d, ids in shifted
-                                              if int(ids[v, u]) == int(ray.body_ids[v, u])]
+            shifted = [
+                raycast_boxes(
+                    boxes, dataclasses.replace(intr, cx=intr.cx - du, cy=intr.cy - dv), T, near, far
+                )
+                for du, dv in (
+                    (EDGE_TIE_PX, 0),
+                    (-EDGE_TIE_PX, 0),
+                    (0, EDGE_TIE_PX),
+                    (0, -EDGE_TIE_PX),
+                )
+            ]
+        seen = [float(ray.depth_m[v, u])] + [
+            float(d[v, u]) for d, ids in shifted if int(ids[v, u]) == int(ray.body_ids[v, u])
+        ]
         if min(seen) - DEPTH_TOL_M <= float(tiny.depth_m[v, u]) <= max(seen) + DEPTH_TOL_M:
             out["edge_tie"] += 1
             out["depth_edge_tie"] += 1
@@ -218,8 +234,9 @@ def _compare(client, cfg, cell, poses, totals, bodies=None):
     boxes = boxes_from_pybullet(client, bodies)
     for T in poses:
         tiny = render_depth(client, intr, T, near, far, ground=ground, renderer="tinyrenderer")
-        ray = render_depth(client, intr, T, near, far, ground=ground, renderer="raycast",
-                           bodies=bodies)
+        ray = render_depth(
+            client, intr, T, near, far, ground=ground, renderer="raycast", bodies=bodies
+        )
         c = classify(tiny, ray, boxes, set(cell[1:]), T, intr, near, far, cell[0])
         for k in ("pixels", "bin_tie", "edge_tie", "depth_edge_tie", "crack", "near_plane"):
             totals[k] += c[k]
@@ -235,18 +252,29 @@ def test_heaps_match_tinyrenderer():
     faces): identical masks but for the counted ties, depth within 0.1 mm."""
     cfg = OmegaConf.to_object(compose("generate", ["experiment=smoke"]))
     client = p.connect(p.DIRECT)
-    totals = {"frames": 0, "pixels": 0, "bin_tie": 0, "edge_tie": 0, "depth_edge_tie": 0,
-              "crack": 0, "near_plane": 0, "unexplained": [], "depth_max_m": 0.0}
+    totals = {
+        "frames": 0,
+        "pixels": 0,
+        "bin_tie": 0,
+        "edge_tie": 0,
+        "depth_edge_tie": 0,
+        "crack": 0,
+        "near_plane": 0,
+        "unexplained": [],
+        "depth_max_m": 0.0,
+    }
     try:
         for i in range(12):
             boxes = dataclasses.replace(cfg.boxes, min_count=20) if i < 6 else cfg.boxes
             cell = build_cell(client, cfg.bin, cfg.physics)
-            heap = drop_heap(client, np.random.default_rng([2024, 0, i]), boxes, cfg.bin,
-                             cfg.physics)
+            heap = drop_heap(
+                client, np.random.default_rng([2024, 0, i]), boxes, cfg.bin, cfg.physics
+            )
             if not heap.boxes:
                 continue
             poses = [camera_pose_above_bin(cfg.camera.height_above_bin_floor)] + closeup_poses(
-                heap.boxes, np.random.default_rng([2024, 1, i]), (0.15, 0.2, 0.3))
+                heap.boxes, np.random.default_rng([2024, 1, i]), (0.15, 0.2, 0.3)
+            )
             _compare(client, cfg, cell, poses, totals)
     finally:
         p.disconnect(client)
@@ -265,13 +293,27 @@ def test_closed_loop_frames_match_tinyrenderer():
     from pipeline.controller.planning import DexNetStylePlanner
     from pipeline.world.trial import make_runner
 
-    cfg = compose("evaluate", ["experiment=default", "evaluate.boxes_per_trial=3",
-                               "evaluate.dexnet_variant=planarity"])
-    runner = make_runner(cfg, "dexnet", lambda cell: DexNetStylePlanner(
-        cfg, "planarity", cell.robot.home_camera_pose(), None))
+    cfg = compose(
+        "evaluate",
+        ["experiment=default", "evaluate.boxes_per_trial=3", "evaluate.dexnet_variant=planarity"],
+    )
+    runner = make_runner(
+        cfg,
+        "dexnet",
+        lambda cell: DexNetStylePlanner(cfg, "planarity", cell.robot.home_camera_pose(), None),
+    )
     cell = runner.cell
-    totals = {"frames": 0, "pixels": 0, "bin_tie": 0, "edge_tie": 0, "depth_edge_tie": 0,
-              "crack": 0, "near_plane": 0, "unexplained": [], "depth_max_m": 0.0}
+    totals = {
+        "frames": 0,
+        "pixels": 0,
+        "bin_tie": 0,
+        "edge_tie": 0,
+        "depth_edge_tie": 0,
+        "crack": 0,
+        "near_plane": 0,
+        "unexplained": [],
+        "depth_max_m": 0.0,
+    }
     render = cell.render
 
     def render_both(T_world_cam=None):
@@ -283,8 +325,9 @@ def test_closed_loop_frames_match_tinyrenderer():
         for b, (_, orn) in zip(hidden, poses):
             p.resetBasePositionAndOrientation(b, [0, 0, -50], orn, physicsClientId=cell.client)
         try:
-            _compare(cell.client, cfg, cell.cell_ids, [frame.T_world_cam], totals,
-                     bodies=cell.obstacles)
+            _compare(
+                cell.client, cfg, cell.cell_ids, [frame.T_world_cam], totals, bodies=cell.obstacles
+            )
         finally:
             for b, (pos, orn) in zip(hidden, poses):
                 p.resetBasePositionAndOrientation(b, pos, orn, physicsClientId=cell.client)
@@ -292,8 +335,9 @@ def test_closed_loop_frames_match_tinyrenderer():
 
     cell.render = render_both
     try:
-        runner.run_trial(0, np.random.default_rng([2024, 31, 0]),
-                         np.random.default_rng([2024, 37, 0]))
+        runner.run_trial(
+            0, np.random.default_rng([2024, 31, 0]), np.random.default_rng([2024, 37, 0])
+        )
     finally:
         cell.close()
         runner.robot_side.close()
@@ -326,8 +370,9 @@ def test_generation_uses_the_configured_renderer():
     try:
         scenes = {}
         for name in ("raycast", "tinyrenderer"):
-            cfg = OmegaConf.to_object(compose("generate", ["experiment=smoke",
-                                                           f"camera.renderer={name}"]))
+            cfg = OmegaConf.to_object(
+                compose("generate", ["experiment=smoke", f"camera.renderer={name}"])
+            )
             scenes[name] = simulate_scene(client, cfg, scene_rng(3, 0, 4))
     finally:
         p.disconnect(client)
@@ -339,10 +384,11 @@ def test_generation_uses_the_configured_renderer():
 
 
 def test_a_mistyped_renderer_is_refused_before_any_work(tmp_path):
-    from pipeline.generate import generate
+    from pipeline.stages.generate import generate
 
-    cfg = compose("generate", ["experiment=smoke", f"paths.root={tmp_path}",
-                               "camera.renderer=raytrace"])
+    cfg = compose(
+        "generate", ["experiment=smoke", f"paths.root={tmp_path}", "camera.renderer=raytrace"]
+    )
     with pytest.raises(ValueError, match="camera.renderer must be one of tinyrenderer, raycast"):
         generate(cfg)
     assert not (tmp_path / "data").exists() or not any((tmp_path / "data").rglob("*.npz"))

@@ -11,16 +11,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import smoke_overrides
 from matplotlib import image as mpimg
 
 from pipeline.artifacts import ArtifactError, load_manifest, verify_artifact
-from pipeline.cli import compose, stage_main
-from conftest import smoke_overrides
-from pipeline.dataset.scenes import SPLITS, SceneDataset
-from pipeline.generate import generate
 from pipeline.dataset.labels import LabelSet
-from pipeline.label import label
-from pipeline.labelling.types import GraspClass
+from pipeline.dataset.scenes import SPLITS, SceneDataset
+from pipeline.grasping.types import GraspClass
 from pipeline.planner.evaluate import PAPER_TABLE1
 from pipeline.report import report
 from pipeline.report.dataset import dataset_stats
@@ -29,7 +26,10 @@ from pipeline.report.labels import LABEL_NOT_RUN, LabelInfo, check_labels
 from pipeline.report.publish import publish
 from pipeline.report.robustness import ROBUSTNESS_NOT_RUN
 from pipeline.report.training import TABLE1_SECTION, TRAIN_NOT_RUN
-from pipeline.train import train
+from pipeline.runtime.cli import compose, stage_main
+from pipeline.stages.generate import generate
+from pipeline.stages.label import label
+from pipeline.stages.train import train
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 LABEL_TABLES = ("label_classes.csv", "label_ng_reasons.csv", "surface_accuracy.csv")
@@ -110,13 +110,17 @@ def test_readme_names_versions_and_split_counts(root_a: Path, report_a: Path) ->
     label_dir = (root_a / "data" / "label" / "latest").resolve()
     assert label_dir.name in readme
     train_dir = (root_a / "models" / "train" / "latest").resolve()
-    assert load_manifest(report_a)["upstream"] == {"generate": gen_dir.name,
-                                                   "label": label_dir.name,
-                                                   "train": train_dir.name}
+    assert load_manifest(report_a)["upstream"] == {
+        "generate": gen_dir.name,
+        "label": label_dir.name,
+        "train": train_dir.name,
+    }
     dataset = _section(readme, "## Dataset")
-    rows = {line.split("|")[1].strip(): [c.strip() for c in line.strip("|\n ").split("|")]
-            for line in dataset.splitlines()
-            if line.startswith("| ") and line.split("|")[1].strip() in (*SPLITS, "all")}
+    rows = {
+        line.split("|")[1].strip(): [c.strip() for c in line.strip("|\n ").split("|")]
+        for line in dataset.splitlines()
+        if line.startswith("| ") and line.split("|")[1].strip() in (*SPLITS, "all")
+    }
     assert [rows[s][1] for s in SPLITS] == ["4", "1", "2"]
     assert rows["all"][1] == "7"
     for split in SPLITS:
@@ -129,8 +133,9 @@ def test_readme_names_versions_and_split_counts(root_a: Path, report_a: Path) ->
     assert load_manifest(label_dir)["created"] not in readme
 
 
-def test_readme_label_tables_match_label_manifest(root_a: Path, report_a: Path,
-                                                  label_metrics: dict) -> None:
+def test_readme_label_tables_match_label_manifest(
+    root_a: Path, report_a: Path, label_metrics: dict
+) -> None:
     readme = (root_a / "reports" / "README.md").read_text()
     assert "## Labels (paper Sec. 4.3, Figs. 4–6)" in readme
     assert LABEL_NOT_RUN not in readme
@@ -138,7 +143,8 @@ def test_readme_label_tables_match_label_manifest(root_a: Path, report_a: Path,
 
     classes = _md_table(_section(readme, "### Grasp points per class"))
     assert [(r["split"], r["level"]) for r in classes] == [
-        (s, level) for s in (*SPLITS, "all") for level in ("hand", "robot")]
+        (s, level) for s in (*SPLITS, "all") for level in ("hand", "robot")
+    ]
     for r in classes:
         key = "hand_level_classes" if r["level"] == "hand" else "classes"
         if r["split"] == "all":
@@ -157,28 +163,44 @@ def test_readme_label_tables_match_label_manifest(root_a: Path, report_a: Path,
 
     reasons = {r["NG reason"]: r for r in _md_table(_section(readme, "### NG reasons"))}
     assert {"too_small", "center_occluded", "ik", "joint_limits", "collision", "total"} <= set(
-        reasons)
+        reasons
+    )
     for name, r in reasons.items():
         for s in SPLITS:
-            expected = (splits[s]["classes"]["NG"] if name == "total"
-                        else splits[s]["ng_reasons"].get(name, 0))
+            expected = (
+                splits[s]["classes"]["NG"]
+                if name == "total"
+                else splits[s]["ng_reasons"].get(name, 0)
+            )
             assert int(r[s]) == expected, (name, s)
     assert int(reasons["total"]["all"]) == sum(splits[s]["classes"]["NG"] for s in SPLITS)
     assert reasons["too_small"]["level"] == "hand"
     assert reasons["collision"]["level"] == "robot"
 
-    accuracy = {r["split"]: r for r in _md_table(_section(readme, "### Surface detection accuracy"))}
+    accuracy = {
+        r["split"]: r for r in _md_table(_section(readme, "### Surface detection accuracy"))
+    }
     assert list(accuracy) == [*SPLITS, "all"]
-    columns = {"images": "images", "found": "found", "missed": "missed", "spurious": "spurious",
-               "precision": "precision", "recall": "recall",
-               "centre error median (px)": "center_err_px_median",
-               "centre error p90 (px)": "center_err_px_p90",
-               "centre error median (mm)": "center_err_mm_median",
-               "centre error p90 (mm)": "center_err_mm_p90",
-               "normal error median (deg)": "normal_err_deg_median",
-               "normal error p90 (deg)": "normal_err_deg_p90"}
+    columns = {
+        "images": "images",
+        "found": "found",
+        "missed": "missed",
+        "spurious": "spurious",
+        "precision": "precision",
+        "recall": "recall",
+        "centre error median (px)": "center_err_px_median",
+        "centre error p90 (px)": "center_err_px_p90",
+        "centre error median (mm)": "center_err_mm_median",
+        "centre error p90 (mm)": "center_err_mm_p90",
+        "normal error median (deg)": "normal_err_deg_median",
+        "normal error p90 (deg)": "normal_err_deg_p90",
+    }
     for split, r in accuracy.items():
-        m = label_metrics["surface_accuracy"] if split == "all" else splits[split]["surface_accuracy"]
+        m = (
+            label_metrics["surface_accuracy"]
+            if split == "all"
+            else splits[split]["surface_accuracy"]
+        )
         for header, key in columns.items():
             if m[key] is None:
                 assert r[header] == "—"
@@ -194,8 +216,9 @@ def test_readme_label_tables_match_label_manifest(root_a: Path, report_a: Path,
     assert not re.search(r"\d", throughput.replace(label_version, "")), throughput
 
 
-def test_label_csvs_agree_with_manifest_and_labels(root_a: Path, report_a: Path,
-                                                   label_dir: Path, label_metrics: dict) -> None:
+def test_label_csvs_agree_with_manifest_and_labels(
+    root_a: Path, report_a: Path, label_dir: Path, label_metrics: dict
+) -> None:
     tables = root_a / "reports" / "tables"
     splits = label_metrics["splits"]
     classes = {(r["split"], r["level"]): r for r in _read_csv(tables / "label_classes.csv")}
@@ -206,15 +229,20 @@ def test_label_csvs_agree_with_manifest_and_labels(root_a: Path, report_a: Path,
         for i in range(len(labels)):
             final += np.bincount(labels[i]["grasp_class"], minlength=4)
             hand += np.bincount(labels[i]["hand_class"], minlength=4)
-        for level, counts, key in (("robot", final, "classes"), ("hand", hand, "hand_level_classes")):
+        for level, counts, key in (
+            ("robot", final, "classes"),
+            ("hand", hand, "hand_level_classes"),
+        ):
             row = classes[(s, level)]
             for c in GraspClass:
                 assert int(row[c.name]) == counts[c] == splits[s][key][c.name]
-                assert float(row[f"{c.name} (%)"]) == pytest.approx(100 * counts[c] / counts.sum(),
-                                                                    abs=0.005)
+                assert float(row[f"{c.name} (%)"]) == pytest.approx(
+                    100 * counts[c] / counts.sum(), abs=0.005
+                )
     for level in ("hand", "robot"):
         assert int(classes[("all", level)]["grasp points"]) == sum(
-            splits[s]["grasp_points"] for s in SPLITS)
+            splits[s]["grasp_points"] for s in SPLITS
+        )
 
     reasons = {r["NG reason"]: r for r in _read_csv(tables / "label_ng_reasons.csv")}
     for s in SPLITS:
@@ -224,13 +252,20 @@ def test_label_csvs_agree_with_manifest_and_labels(root_a: Path, report_a: Path,
 
     accuracy = {r["split"]: r for r in _read_csv(tables / "surface_accuracy.csv")}
     for split, r in accuracy.items():
-        m = label_metrics["surface_accuracy"] if split == "all" else splits[split]["surface_accuracy"]
+        m = (
+            label_metrics["surface_accuracy"]
+            if split == "all"
+            else splits[split]["surface_accuracy"]
+        )
         assert int(r["found"]) == m["found"] and int(r["missed"]) == m["missed"]
         assert int(r["spurious"]) == m["spurious"] and int(r["images"]) == m["images"]
-        for header, key in (("recall", "recall"), ("precision", "precision"),
-                            ("centre error median (px)", "center_err_px_median"),
-                            ("centre error p90 (mm)", "center_err_mm_p90"),
-                            ("normal error p90 (deg)", "normal_err_deg_p90")):
+        for header, key in (
+            ("recall", "recall"),
+            ("precision", "precision"),
+            ("centre error median (px)", "center_err_px_median"),
+            ("centre error p90 (mm)", "center_err_mm_p90"),
+            ("normal error p90 (deg)", "normal_err_deg_p90"),
+        ):
             if m[key] is None:
                 assert r[header] == ""
             else:
@@ -244,8 +279,9 @@ def test_label_consistency_check(root_a: Path, label_dir: Path, label_metrics: d
     gen_dir = (root_a / "data" / "generate" / "latest").resolve()
     stats = dataset_stats(gen_dir)
     manifest = load_manifest(label_dir)
-    good = LabelInfo(label_dir, manifest, manifest["metrics"]["splits"],
-                     manifest["metrics"]["surface_accuracy"])
+    good = LabelInfo(
+        label_dir, manifest, manifest["metrics"]["splits"], manifest["metrics"]["surface_accuracy"]
+    )
     check_labels(good, stats)
     bad_splits = load_manifest(label_dir)["metrics"]["splits"]
     bad_splits["test"]["classes"]["NG"] += 1
@@ -302,10 +338,17 @@ def test_figures_are_png(root_a: Path, report_a: Path) -> None:
 def test_artifact_is_complete_and_logged(report_a: Path) -> None:
     assert verify_artifact(report_a) == []
     files = load_manifest(report_a)["files"]
-    assert {"README.md", "log.rrd", "log.mcap", "tables/dataset_splits.csv",
-            "tables/box_types.csv", "figures/sample_depth.png",
-            "figures/boxes_per_scene.png", "figures/labels_sample.png",
-            *(f"tables/{name}" for name in LABEL_TABLES)} <= set(files)
+    assert {
+        "README.md",
+        "log.rrd",
+        "log.mcap",
+        "tables/dataset_splits.csv",
+        "tables/box_types.csv",
+        "figures/sample_depth.png",
+        "figures/boxes_per_scene.png",
+        "figures/labels_sample.png",
+        *(f"tables/{name}" for name in LABEL_TABLES),
+    } <= set(files)
     from pipeline.tracking import mcap_message_counts
 
     counts = mcap_message_counts(report_a / "log.mcap")
@@ -355,8 +398,11 @@ def test_report_without_label_artifact(root_gen_only: Path, report_a: Path) -> N
     assert "### Grasp points per class" not in readme
     files = load_manifest(out)["files"]
     assert "tables/dataset_splits.csv" in files and "figures/sample_depth.png" in files
-    assert not any(name in rel for rel in files
-                   for name in (*LABEL_TABLES, "labels_sample", "table1_precision", "pr_curve"))
+    assert not any(
+        name in rel
+        for rel in files
+        for name in (*LABEL_TABLES, "labels_sample", "table1_precision", "pr_curve")
+    )
     # the dataset part is the same as with labels
     for rel in ("tables/dataset_splits.csv", "tables/box_types.csv", "figures/sample_depth.png"):
         assert (out / rel).read_bytes() == (report_a / rel).read_bytes()
@@ -420,7 +466,6 @@ def test_sample_count_is_validated(root_a: Path) -> None:
         report(_cfg(root_a, "report", "report.num_sample_images=-1"))
 
 
-
 COLUMNS = {"Top 1": "top1", "Top 1 %": "top1pct", "Top 5 %": "top5pct", "Top 10 %": "top10pct"}
 
 
@@ -442,15 +487,18 @@ def test_table1_matches_train_manifest(root_a: Path, report_a: Path) -> None:
 
     def pct(v):
         return "—" if v is None else f"{100 * v:.2f} %"
+
     for header, key in COLUMNS.items():
         assert rows[pooled][header] == pct(ours[key]), header
         assert rows[old][header] == pct(ours["legacy"][key]), header
-        assert rows[per_image][header] == pct(ours["top1"] if key == "top1"
-                                              else ours["per_image"][key]), header
+        assert rows[per_image][header] == pct(
+            ours["top1"] if key == "top1" else ours["per_image"][key]
+        ), header
     # the calibration curve that chose th is shown, with th among its rows
-    curve = _md_table(section[section.index("**Threshold th = "):])
+    curve = _md_table(section[section.index("**Threshold th = ") :])
     assert [float(r["th"]) for r in curve] == [
-        r["threshold"] for r in manifest["metrics"]["threshold"]["curve"]]
+        r["threshold"] for r in manifest["metrics"]["threshold"]["curve"]
+    ]
     assert th in [float(r["th"]) for r in curve]
     # the definition and the network are described right there, without timings
     assert "same class" in section and "NG" in section and "ceil(k/100" in section
@@ -459,8 +507,10 @@ def test_table1_matches_train_manifest(root_a: Path, report_a: Path) -> None:
     assert f"{net['parameters']:,} parameters" in section
     assert f"{net['macs_per_image']:,} multiply-accumulates" in section
     flip = manifest["config"]["train"]["augment_flip"]
-    assert (f"{manifest['metrics']['images']['train']} training images (each mirrored at random: "
-            f"`train.augment_flip={flip}`) for 1 epoch") in section
+    assert (
+        f"{manifest['metrics']['images']['train']} training images (each mirrored at random: "
+        f"`train.augment_flip={flip}`) for 1 epoch"
+    ) in section
     curve_csv = (root_a / "reports" / "tables" / "training_curve.csv").read_text().splitlines()
     assert curve_csv[0] == "epoch,train loss,val loss,"
     assert len(curve_csv) == 1 + len(manifest["metrics"]["train_loss_per_epoch"])

@@ -14,8 +14,9 @@ def _artifact(top: Path, stage: str, version: str, seconds: float | None, **upst
     folder = top / stage / version
     folder.mkdir(parents=True)
     timings = {} if seconds is None else {"total_s": seconds}
-    (folder / "manifest.json").write_text(json.dumps(
-        {"stage": stage, "version": version, "timings": timings, "upstream": upstream}))
+    (folder / "manifest.json").write_text(
+        json.dumps({"stage": stage, "version": version, "timings": timings, "upstream": upstream})
+    )
 
 
 @pytest.fixture
@@ -40,10 +41,21 @@ def test_every_artifact_counts_once(roots):
     assert sorted(found) == ["a1", "e1", "e2", "g1", "l1", "r1", "t1"]  # not g2, zz, none
     rows = {r["stage"]: r for r in run_time_rows(found)}
     assert [r["stage"] for r in run_time_rows(found)] == [
-        "generate", "label", "train", "evaluate", "ablation", "robustness", "total"]
+        "generate",
+        "label",
+        "train",
+        "evaluate",
+        "ablation",
+        "robustness",
+        "total",
+    ]
     assert (rows["evaluate"]["artifacts"], rows["evaluate"]["seconds"]) == (2, 120.0)
-    assert rows["robustness"] == {"stage": "robustness", "artifacts": 1, "seconds": 0.0,
-                                  "untimed": 1}
+    assert rows["robustness"] == {
+        "stage": "robustness",
+        "artifacts": 1,
+        "seconds": 0.0,
+        "untimed": 1,
+    }
     # 60 + 120 + 600 + 30 + 90 + 6 s, by hand
     assert rows["total"] == {"stage": "total", "artifacts": 7, "seconds": 906.0, "untimed": 1}
 
@@ -52,22 +64,34 @@ def test_each_artifact_counts_for_the_first_stage_that_reaches_it(roots):
     # the report reads train t1, evaluate e1, ablation a1 and robustness r1: g1 and l1 count for
     # train (no generate or label is reported), e2 for the ablation (it reaches e2 before the
     # robustness study does), r1 alone for the robustness study
-    found = by_stage(roots, {"robustness": "r1", "ablation": "a1", "evaluate": "e1",
-                             "train": "t1"})
+    found = by_stage(roots, {"robustness": "r1", "ablation": "a1", "evaluate": "e1", "train": "t1"})
     assert {v: m["stage"] for v, m in found.items()} == {
-        "t1": "train", "l1": "train", "g1": "train", "e1": "evaluate", "a1": "ablation",
-        "e2": "ablation", "r1": "robustness"}
+        "t1": "train",
+        "l1": "train",
+        "g1": "train",
+        "e1": "evaluate",
+        "a1": "ablation",
+        "e2": "ablation",
+        "r1": "robustness",
+    }
     rows = {r["stage"]: r["seconds"] for r in run_time_rows(found)}
-    assert rows == {"train": 780.0, "evaluate": 30.0, "ablation": 96.0, "robustness": 0.0,
-                    "total": 906.0}
+    assert rows == {
+        "train": 780.0,
+        "evaluate": 30.0,
+        "ablation": 96.0,
+        "robustness": 0.0,
+        "total": 906.0,
+    }
 
 
 def test_table_in_minutes_with_share_and_budget(roots):
     table = run_time_table(roots, {"label": "l1", "generate": "g1"}, {"generate": 2, "train": 9})
     # g1 60 s and l1 120 s of 180 s; the total's budget sums the stages' that have one
-    assert table.rows == [["generate", 1, 1.0, 100 / 3, 2, 0],
-                          ["label", 1, 2.0, 200 / 3, None, 0],
-                          ["total", 2, 3.0, 100.0, 2, 0]]
+    assert table.rows == [
+        ["generate", 1, 1.0, 100 / 3, 2, 0],
+        ["label", 1, 2.0, 200 / 3, None, 0],
+        ["total", 2, 3.0, 100.0, 2, 0],
+    ]
     assert table.csv_text().splitlines()[-1] == "total,2,3.00,100.0,2,0"
     assert run_time_table(roots, {"generate": "g1"}).rows[-1][4] is None  # no budget at all
     assert run_time_table(roots, {}).rows == []

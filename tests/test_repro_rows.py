@@ -4,7 +4,7 @@ import time
 
 import rerun as rr
 
-from pipeline.repro_check import rrd_rows_equal
+from pipeline.tools.repro_check import rrd_rows_equal
 
 
 def _record(path, pause: bool, last: float = 5.0) -> None:

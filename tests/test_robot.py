@@ -8,12 +8,19 @@ from enum import Enum
 import numpy as np
 import pybullet as p
 import pytest
+from conftest import conf_section, default_config
 
 from pipeline.camera.geometry import camera_pose_above_bin
-from conftest import conf_section, default_config
-from pipeline.robot import (CUP_DIAMETER, CUP_OFFSET, CUP_TIP_Z, URDF_PATH, Robot, RobotConfig,
-                            build_urdf_xml, rotation_angle_deg, target_camera_pose)
 from pipeline.cell.bin import build_cell
+from pipeline.robot.model import Robot, RobotConfig, rotation_angle_deg
+from pipeline.robot.target_pose import target_camera_pose
+from pipeline.robot.urdf_builder import (
+    CUP_DIAMETER,
+    CUP_OFFSET,
+    CUP_TIP_Z,
+    URDF_PATH,
+    build_urdf_xml,
+)
 
 POS_TOL, ROT_TOL = 0.002, 1.0
 DOWN = np.array([[1.0, 0, 0], [0, -1, 0], [0, 0, -1]])  # camera axes looking straight down
@@ -51,7 +58,9 @@ def _assert_reaches(robot, q, T_target):
 # ----------------------------------------------------------------------------- URDF and FK
 def test_urdf_file_is_the_builders_output():
     assert URDF_PATH.read_text() == build_urdf_xml(), (
-        "urdf/binpick_robot.urdf is stale: regenerate it with pipeline.robot.urdf_builder.write_urdf()")
+        "urdf/binpick_robot.urdf is stale: regenerate it with "
+        "pipeline.robot.urdf_builder.write_urdf()"
+    )
 
 
 def test_urdf_loads_with_seven_movable_joints(cell):
@@ -74,8 +83,12 @@ def test_cups_sit_either_side_of_the_camera(cell):
         T_cam_cup = np.linalg.inv(T_world_cam) @ robot.link_pose(name)
         np.testing.assert_allclose(T_cam_cup[:3, 3], [0.0, y, CUP_TIP_Z], atol=1e-6)
         np.testing.assert_allclose(T_cam_cup[:3, :3], np.eye(3), atol=1e-6)
-        radii = [s[3][1] for s in p.getCollisionShapeData(robot.body_id, robot.link_index[name],
-                                                          physicsClientId=client)]
+        radii = [
+            s[3][1]
+            for s in p.getCollisionShapeData(
+                robot.body_id, robot.link_index[name], physicsClientId=client
+            )
+        ]
         assert max(radii) == pytest.approx(CUP_DIAMETER / 2)
     assert (CUP_OFFSET, CUP_DIAMETER) == (0.035, 0.018)  # paper Fig. 1b
 
@@ -112,10 +125,12 @@ def test_target_pose_left_and_right_put_that_cup_over_the_centre():
     np.testing.assert_allclose(T_left[:3, 3], [0.02, 0.025, 0.35], atol=1e-12)
     np.testing.assert_allclose(T_right[:3, 3], [0.02, -0.045, 0.35], atol=1e-12)
     # Seen from the target pose, the centre is on the active cup's axis, 0.15 m ahead.
-    np.testing.assert_allclose((np.linalg.inv(T_left) @ np.r_[c, 1])[:3], [0, -0.035, 0.15],
-                               atol=1e-12)
-    np.testing.assert_allclose((np.linalg.inv(T_right) @ np.r_[c, 1])[:3], [0, 0.035, 0.15],
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        (np.linalg.inv(T_left) @ np.r_[c, 1])[:3], [0, -0.035, 0.15], atol=1e-12
+    )
+    np.testing.assert_allclose(
+        (np.linalg.inv(T_right) @ np.r_[c, 1])[:3], [0, 0.035, 0.15], atol=1e-12
+    )
 
 
 def test_target_pose_tilted_surface():
@@ -129,8 +144,9 @@ def test_target_pose_tilted_surface():
     np.testing.assert_allclose(T[:3, 3], c + 0.15 * n, atol=1e-12)
     T_left = target_camera_pose(c, n, np.array([1.0, 0.0, 0.0]), "L")
     np.testing.assert_allclose(T_left[:3, 3], c + 0.15 * n + 0.035 * T[:3, 1], atol=1e-12)
-    np.testing.assert_allclose((np.linalg.inv(T_left) @ np.r_[c, 1])[:3], [0, -0.035, 0.15],
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        (np.linalg.inv(T_left) @ np.r_[c, 1])[:3], [0, -0.035, 0.15], atol=1e-12
+    )
 
 
 def test_target_pose_rejects_bad_input():
@@ -142,8 +158,9 @@ def test_target_pose_rejects_bad_input():
     with pytest.raises(ValueError, match="parallel"):
         target_camera_pose(c, n, n, "B")
     Pattern = Enum("Pattern", "R L B NG")  # any enum whose member names are the patterns
-    np.testing.assert_allclose(target_camera_pose(c, n, x, Pattern.L),
-                               target_camera_pose(c, n, x, "L"))
+    np.testing.assert_allclose(
+        target_camera_pose(c, n, x, Pattern.L), target_camera_pose(c, n, x, "L")
+    )
 
 
 # ----------------------------------------------------------------------------- IK
@@ -207,8 +224,9 @@ def test_box_against_the_arm_is_a_collision(cell):
     client, robot, bodies = cell
     q = robot.home_q()
     robot.set_joints(q)
-    (lo, hi) = np.asarray(p.getAABB(robot.body_id, robot.link_index["link2"],
-                                    physicsClientId=client))
+    (lo, hi) = np.asarray(
+        p.getAABB(robot.body_id, robot.link_index["link2"], physicsClientId=client)
+    )
     box = _static_box(client, ((lo + hi) / 2).tolist(), [0.01, 0.01, 0.01])  # inside the upper arm
     try:
         assert ("link2", box) in robot.in_collision(q, [*bodies, box])
@@ -261,8 +279,11 @@ def test_many_obstacles_give_the_contacts_of_few():
         build_cell(client, bin_cfg, conf_section("physics"))
         robot = Robot(default_config(RobotConfig))
         robot.load(client, ground_z=-bin_cfg.floor_thickness)
-        cubes = [_static_box(client, [-0.05 + 0.03 * i, -0.15 + 0.03 * j, 0.01],
-                             [0.01, 0.01, 0.01]) for i in range(6) for j in range(10)]
+        cubes = [
+            _static_box(client, [-0.05 + 0.03 * i, -0.15 + 0.03 * j, 0.01], [0.01, 0.01, 0.01])
+            for i in range(6)
+            for j in range(10)
+        ]
         home = robot.home_camera_pose()
         hits_seen = 0
         for depth in np.linspace(0.55, 0.63, 9):
@@ -270,8 +291,9 @@ def test_many_obstacles_give_the_contacts_of_few():
             T[2, 3] = home[2, 3] - depth + 0.02  # the camera down to ~2 cm above the cubes' tops
             res = robot.solve_ik(T, seed_q=robot.home_q())
             many = sorted(robot.in_collision(res.q, cubes))
-            few = sorted(robot.in_collision(res.q, cubes[:30]) + robot.in_collision(
-                res.q, cubes[30:]))
+            few = sorted(
+                robot.in_collision(res.q, cubes[:30]) + robot.in_collision(res.q, cubes[30:])
+            )
             few = sorted(c for c in few if c.other_body != robot.body_id)
             many = sorted(c for c in many if c.other_body != robot.body_id)
             assert many == few

@@ -9,8 +9,8 @@ from types import SimpleNamespace
 import numpy as np
 import pybullet as p
 import pytest
-
 from conftest import default_config
+
 from pipeline.robot.path import PathCheckConfig, check_motion, distance_to_path, substeps
 
 
@@ -58,13 +58,20 @@ def test_every_substep_is_checked_by_hand():
     res = check_motion(robot, q, poses, default_config(PathCheckConfig), obstacle_ids=[1])
     assert (res.ok, res.index, res.samples) == (True, 2, 4)
     assert np.array([c[0] for c in robot.checked]) == pytest.approx(
-        np.array([[0.1, 0], [0.2, 0], [0.3, 0], [0.3, 0.3]]))
+        np.array([[0.1, 0], [0.2, 0], [0.3, 0], [0.3, 0.3]])
+    )
     robot = _CountingRobot(lambda q: abs(q[0] - 0.2) < 1e-9)
     res = check_motion(robot, q, poses, default_config(PathCheckConfig), obstacle_ids=[1])
     assert (res.ok, res.reason, res.index, res.samples) == (False, "collision", 0, 2)
     robot = _CountingRobot(lambda q: False)
-    check_motion(robot, q[:2], poses[:2], default_config(PathCheckConfig, bin_clearance=0.002),
-                 obstacle_ids=[1, 2], padded_ids=[2])
+    check_motion(
+        robot,
+        q[:2],
+        poses[:2],
+        default_config(PathCheckConfig, bin_clearance=0.002),
+        obstacle_ids=[1, 2],
+        padded_ids=[2],
+    )
     assert [c[1] for c in robot.checked[:2]] == [None, pytest.approx(0.007)]
     assert robot.checked[0][0] == robot.checked[1][0]  # both at the first part's joints
 
@@ -91,7 +98,8 @@ def test_predicted_servo_straight_down_by_hand(robot):
     """Centred, level, axes along the camera's: every error but log Z is 0, so the servo moves
     the camera down (x = y = 0 up to the joints' first-order step, no turn) from 0.625 m to
     d* = 0.15 m above the face (0.275 m, within the 1.5 mm log-Z tolerance), never faster than
-    0.5 m/s × 1/30 s per period (up to the same step error). With the lift, the first goal 0.15 m higher (the centre seen at (0, 0, 0.30)) is
+    0.5 m/s × 1/30 s per period (up to the same step error). With the lift, the first goal 0.15 m
+    higher (the centre seen at (0, 0, 0.30)) is
     passed on the way down. Three periods are not enough: "timeout"."""
     from pipeline.servo.control import ServoConfig
     from pipeline.servo.predict import servo_motion
@@ -133,12 +141,25 @@ def test_a_motion_through_an_obstacle_is_rejected_though_its_end_pose_is_clear(r
     T_home, centre, normal = _level_face_below_home()
     home = robot.home_q()
     T0 = robot.camera_pose(home)
-    m = servo_motion(robot, home, centre, normal, T0[:3, 0], T0[:3, 1], "B",
-                     [default_config(ServoConfig)], 1 / 30, 240, 1e-3, 3.14)
+    m = servo_motion(
+        robot,
+        home,
+        centre,
+        normal,
+        T0[:3, 0],
+        T0[:3, 1],
+        "B",
+        [default_config(ServoConfig)],
+        1 / 30,
+        240,
+        1e-3,
+        3.14,
+    )
     assert check_motion(robot, m.q, m.poses, default_config(PathCheckConfig), []).ok
     col = p.createCollisionShape(p.GEOM_BOX, halfExtents=[0.015] * 3, physicsClientId=client)
-    cube = p.createMultiBody(0, col, -1, basePosition=[T0[0, 3], T0[1, 3] + 0.06, 0.40],
-                             physicsClientId=client)
+    cube = p.createMultiBody(
+        0, col, -1, basePosition=[T0[0, 3], T0[1, 3] + 0.06, 0.40], physicsClientId=client
+    )
     assert robot.in_collision(m.q[-1], [cube]) == []
     res = check_motion(robot, m.q, m.poses, default_config(PathCheckConfig), [cube])
     assert (res.ok, res.reason) == (False, "collision")
@@ -164,15 +185,17 @@ def test_a_servo_that_sweeps_a_wall_is_rejected(smoke_cfg):
     and with the bin taken away the same motion passes. Turned by 90° about the normal (the cup
     line along the wall) the motion is clear."""
     from pipeline.camera.geometry import project, world_to_camera
-    from pipeline.controller.grasp_check import check_grasp
-    from pipeline.robot.model import robot_config
     from pipeline.controller.check import paper_x_axis
-    from pipeline.robot.model import Robot
+    from pipeline.labelling.grasp_check import check_grasp
+    from pipeline.robot.model import Robot, robot_config
     from pipeline.servo.descriptor import describe_surface, descriptor_config
     from pipeline.world.cell import PickCell
 
-    cfg = smoke_cfg("evaluate", "evaluate.boxes_per_trial=1",
-                    "eval_boxes.types=[{name: square, size: [0.09, 0.09, 0.035]}]")
+    cfg = smoke_cfg(
+        "evaluate",
+        "evaluate.boxes_per_trial=1",
+        "eval_boxes.types=[{name: square, size: [0.09, 0.09, 0.035]}]",
+    )
     # the servo stops at the lift's via point (the case was worked out for that path; passing
     # the via point early cuts the corner and clears this wall)
     cfg.motion.via_tolerance_scale = 1.0
@@ -181,22 +204,38 @@ def test_a_servo_that_sweeps_a_wall_is_rejected(smoke_cfg):
         cell.reset(np.random.default_rng(0), 1)
         (body,) = list(cell.boxes)
         p.resetBasePositionAndOrientation(
-            body, [-0.1784, -0.0202, 0.045], [-0.4764, 0.5225, 0.5225, -0.4764],
-            physicsClientId=cell.client)
+            body,
+            [-0.1784, -0.0202, 0.045],
+            [-0.4764, 0.5225, 0.5225, -0.4764],
+            physicsClientId=cell.client,
+        )
         cell.settle()
         frame = cell.render()
         top = np.asarray(cell.box_pose(body)[0]) + [0, 0, 0.045]
         u, v = project(world_to_camera(top, frame.T_world_cam), cell.intrinsics)
-        feats, _ = describe_surface(frame.depth_m, cell.intrinsics, np.array([u, v]),
-                                    descriptor_config(cfg))
+        feats, _ = describe_surface(
+            frame.depth_m, cell.intrinsics, np.array([u, v]), descriptor_config(cfg)
+        )
 
         def check(path_check, rotations, obstacles):
             cfg.robot.path_check, cfg.hand.rotations_deg = path_check, rotations
             bin_ids = [b for b in cell.cell_ids[1:] if b in obstacles]
-            return check_grasp(cell.robot, cfg, cfg.hand, frame.T_world_cam, feats.center_cam,
-                               feats.normal_cam, feats.long_axis_cam, feats.short_axis_cam,
-                               paper_x_axis(feats), "L", cell.intrinsics, obstacles, [body],
-                               bin_ids)
+            return check_grasp(
+                cell.robot,
+                cfg,
+                cfg.hand,
+                frame.T_world_cam,
+                feats.center_cam,
+                feats.normal_cam,
+                feats.long_axis_cam,
+                feats.short_axis_cam,
+                paper_x_axis(feats),
+                "L",
+                cell.intrinsics,
+                obstacles,
+                [body],
+                bin_ids,
+            )
 
         paper = check(False, [0], cell.obstacles)
         assert paper.reason is None and paper.x_world[0] > 0.99  # the pose alone: clear
@@ -215,7 +254,8 @@ def test_the_final_press_is_checked_by_hand():
     its top at 0.294 m: 6 mm below the camera at the grasp pose (clear of the 5 mm margin), in
     the camera's way 7 mm before the press ends: "press". The slab 20 mm lower is clear."""
     from conftest import composed
-    from pipeline.controller.grasp_check import _press_reason
+
+    from pipeline.labelling.grasp_check import press_reason
     from pipeline.robot.model import Robot, robot_config
 
     cfg = composed()
@@ -230,16 +270,18 @@ def test_the_final_press_is_checked_by_hand():
         assert res.ok
 
         def slab(top):
-            col = p.createCollisionShape(p.GEOM_BOX, halfExtents=[0.01, 0.005, 0.002],
-                                         physicsClientId=client)
-            return p.createMultiBody(0.0, col, basePosition=[0.04, 0.0, top - 0.002],
-                                     physicsClientId=client)
+            col = p.createCollisionShape(
+                p.GEOM_BOX, halfExtents=[0.01, 0.005, 0.002], physicsClientId=client
+            )
+            return p.createMultiBody(
+                0.0, col, basePosition=[0.04, 0.0, top - 0.002], physicsClientId=client
+            )
 
         near = slab(0.294)
         assert robot.in_collision(res.q, [near], self_collision=False) == []
-        assert _press_reason(robot, T, res.q, cfg.hand, cfg, [near]) == "press"
+        assert press_reason(robot, T, res.q, cfg.hand, cfg, [near]) == "press"
         p.removeBody(near, physicsClientId=client)
         low = slab(0.274)
-        assert _press_reason(robot, T, res.q, cfg.hand, cfg, [low]) is None
+        assert press_reason(robot, T, res.q, cfg.hand, cfg, [low]) is None
     finally:
         p.disconnect(client)

@@ -1,4 +1,4 @@
-"""The noisy pipeline and the robustness study (pipeline/robustness.py).
+"""The noisy pipeline and the robustness study (pipeline/stages/robustness.py).
 
 The study's comparisons rest on three properties checked here: the noisy generation holds the
 clean generation's heaps (its ``depth_clean`` equals the clean run's ``depth`` byte for byte),
@@ -14,18 +14,21 @@ import numpy as np
 import pytest
 from omegaconf import OmegaConf
 
-from pipeline.cli import compose
 from pipeline.dataset import SceneDataset
 from pipeline.dataset.storage import read_npz
-from pipeline.robustness import depth_getter
+from pipeline.runtime.cli import compose
+from pipeline.stages.robustness import depth_getter
+
 
 @pytest.fixture(scope="module")
 def pipelines(smoke_pipeline, smoke_pipelines):
     """{"clean" | "noisy": (generation folder, label folder)}: the session's smoke pipeline and
     the same heaps rendered through the SR300 model."""
     noisy = smoke_pipelines("sensor=sr300", stages=("generate", "label"))
-    return {kind: (root.artifact("generate"), root.artifact("label"))
-            for kind, root in (("clean", smoke_pipeline), ("noisy", noisy))}
+    return {
+        kind: (root.artifact("generate"), root.artifact("label"))
+        for kind, root in (("clean", smoke_pipeline), ("noisy", noisy))
+    }
 
 
 def test_noisy_generation_holds_the_clean_heaps(pipelines):
@@ -44,8 +47,10 @@ def test_noisy_generation_holds_the_clean_heaps(pipelines):
             np.testing.assert_array_equal(sb.depth_clean_m, sa.depth_m)
             np.testing.assert_array_equal(sb.mask, sa.mask)
             assert [bx.type_index for bx in sb.boxes] == [bx.type_index for bx in sa.boxes]
-            np.testing.assert_array_equal(np.stack([bx.T_world_box for bx in sb.boxes]),
-                                          np.stack([bx.T_world_box for bx in sa.boxes]))
+            np.testing.assert_array_equal(
+                np.stack([bx.T_world_box for bx in sb.boxes]),
+                np.stack([bx.T_world_box for bx in sa.boxes]),
+            )
             # the sensor's depth: holes where the ideal depth had data, noise elsewhere
             lost = (sb.depth_m == 0) & (sa.depth_m > 0)
             assert 0.01 < lost.mean() < 0.5
@@ -76,14 +81,17 @@ def test_depth_getter_inputs(pipelines):
     filled = depth_getter("sensor+fill")(scene)
     assert (filled == 0).sum() < (scene.depth_m == 0).sum()
     assert np.array_equal(filled[scene.depth_m > 0], scene.depth_m[scene.depth_m > 0])
-    for bad, hint in (("noisy", "ideal, sensor or sensor"), ("sensor+blur", "choose from"),
-                      ("ideal+fill", "ideal, sensor or sensor")):
+    for bad, hint in (
+        ("noisy", "ideal, sensor or sensor"),
+        ("sensor+blur", "choose from"),
+        ("ideal+fill", "ideal, sensor or sensor"),
+    ):
         with pytest.raises(ValueError, match=hint):
             depth_getter(bad)
 
 
 def test_bad_variant_model_is_refused_before_any_work(tmp_path):
-    from pipeline.robustness import robustness
+    from pipeline.stages.robustness import robustness
 
     cfg = compose("robustness", ["experiment=smoke", f"paths.root={tmp_path}"])
     cfg.robustness.policies[1].model = "dirty"
@@ -98,14 +106,13 @@ def test_closed_loop_sensor_stream_keeps_the_heaps():
     from pipeline.world.trial import HEAP_STREAMS
 
     HEAP_SEED = HEAP_STREAMS["dev"][0]
-    from pipeline.robot.model import robot_config
+    from pipeline.robot.model import Robot, robot_config
     from pipeline.world.cell import PickCell
-    from pipeline.robot.model import Robot
 
     poses = {}
     for sensor in ("ideal", "sr300"):
         cfg = OmegaConf.to_object(compose("evaluate", ["experiment=smoke", f"sensor={sensor}"]))
-        cell = PickCell(cfg, lambda: Robot(robot_config(cfg)))
+        cell = PickCell(cfg, lambda cfg=cfg: Robot(robot_config(cfg)))
         cell.reset(np.random.default_rng([0, HEAP_SEED, 0]), 3)
         cell.sensor_rng = np.random.default_rng([0, 41, 0])
         frame = cell.render()
@@ -126,9 +133,10 @@ def test_smoke_study_end_to_end(smoke_pipeline, tmp_path):
     pipeline read as `make reproduce` leaves it, the noisy one built; tables, artifacts reused
     across variants, upstream versions."""
     from conftest import smoke_overrides
+
     from pipeline.artifacts import ArtifactError
-    from pipeline.baseline import baseline
-    from pipeline.robustness import robustness
+    from pipeline.stages.baseline import baseline
+    from pipeline.stages.robustness import robustness
 
     empty = smoke_overrides(tmp_path / "empty")
     with pytest.raises(ArtifactError, match="robustness.train_version"):
@@ -149,7 +157,8 @@ def test_smoke_study_end_to_end(smoke_pipeline, tmp_path):
     assert {s: smoke.artifact(s) for s in latest} == latest
     study = json.loads((out / "robustness.json").read_text())
     assert [(r["model"], r["input"]) for r in study["table1"]] == [
-        (m, i) for m in ("clean", "noisy") for i in ("ideal", "sensor", "sensor+fill_median")]
+        (m, i) for m in ("clean", "noisy") for i in ("ideal", "sensor", "sensor+fill_median")
+    ]
     planners = {r["planner"] for r in study["table2"]}
     assert {"dcnn_clean", "dcnn_noisy", "gqcnn"} <= planners
     cl = {r["variant"]: r for r in study["closed_loop"]}
@@ -159,11 +168,24 @@ def test_smoke_study_end_to_end(smoke_pipeline, tmp_path):
     assert cl["noisy_sensor"]["evaluate_version"] != cl["clean_ideal"]["evaluate_version"]
     manifest = json.loads((out / "manifest.json").read_text())
     up = manifest["upstream"]
-    for key in ("generate_clean", "generate_noisy", "label_clean", "label_noisy", "train_clean",
-                "train_noisy", "baseline", "evaluate_clean_ideal", "evaluate_noisy_sensor"):
+    for key in (
+        "generate_clean",
+        "generate_noisy",
+        "label_clean",
+        "label_noisy",
+        "train_clean",
+        "train_noisy",
+        "baseline",
+        "evaluate_clean_ideal",
+        "evaluate_noisy_sensor",
+    ):
         assert key in up, key
-    for key, stage in (("generate_clean", "generate"), ("label_clean", "label"),
-                       ("train_clean", "train"), ("baseline", "baseline")):
+    for key, stage in (
+        ("generate_clean", "generate"),
+        ("label_clean", "label"),
+        ("train_clean", "train"),
+        ("baseline", "baseline"),
+    ):
         assert up[key] == latest[stage].name, key
     for name in ("table1.csv", "table2.csv", "closed_loop.csv", "log.rrd", "log.mcap"):
         assert (out / name).is_file()
@@ -172,7 +194,7 @@ def test_smoke_study_end_to_end(smoke_pipeline, tmp_path):
 
 
 def test_noisy_model_needs_the_noisy_network(tmp_path):
-    from pipeline.robustness import robustness
+    from pipeline.stages.robustness import robustness
 
     base = ["experiment=smoke", f"paths.root={tmp_path}", "robustness.noisy_network=false"]
     cfg = compose("robustness", base)
@@ -187,9 +209,10 @@ def test_one_network_study(smoke_pipeline, tmp_path):
     """robustness.noisy_network=false: no second network; the noisy generation holds the test
     split only; Tables 1 and 2 and every closed-loop row measure the network under test."""
     from conftest import smoke_overrides
+
     from pipeline.artifacts import load_manifest
-    from pipeline.baseline import baseline
-    from pipeline.robustness import robustness
+    from pipeline.stages.baseline import baseline
+    from pipeline.stages.robustness import robustness
 
     smoke = smoke_pipeline.copy(tmp_path / "root")
     base = smoke_overrides(smoke.root, "baseline.epochs=1", "robustness.noisy_network=false")

@@ -6,8 +6,8 @@ import math
 import pytest
 import torch
 
-from pipeline.cli import compose
 from pipeline.planner.schedule import ScheduleConfig, learning_rate, schedule_config
+from pipeline.runtime.cli import compose
 
 
 def onecycle(max_lr=1e-3, warmup=0.3, div=25.0, final=1e4) -> ScheduleConfig:
@@ -36,11 +36,19 @@ def test_onecycle_matches_torch(steps, warmup):
     sc = onecycle(warmup=warmup)
     opt = torch.optim.SGD([torch.nn.Parameter(torch.zeros(1))], lr=sc.max_lr)
     ref = torch.optim.lr_scheduler.OneCycleLR(
-        opt, max_lr=sc.max_lr, total_steps=steps, pct_start=warmup, anneal_strategy="cos",
-        div_factor=sc.div_factor, final_div_factor=sc.final_div_factor, cycle_momentum=False)
+        opt,
+        max_lr=sc.max_lr,
+        total_steps=steps,
+        pct_start=warmup,
+        anneal_strategy="cos",
+        div_factor=sc.div_factor,
+        final_div_factor=sc.final_div_factor,
+        cycle_momentum=False,
+    )
     for step in range(steps):
-        assert learning_rate(step, steps, sc) == pytest.approx(opt.param_groups[0]["lr"],
-                                                               rel=1e-9), step
+        assert learning_rate(step, steps, sc) == pytest.approx(
+            opt.param_groups[0]["lr"], rel=1e-9
+        ), step
         opt.step()
         ref.step()
 

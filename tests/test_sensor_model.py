@@ -16,7 +16,11 @@ from omegaconf import OmegaConf
 
 from pipeline.camera.geometry import Intrinsics
 from pipeline.camera.sensor import (
-    apply_sensor_model, depth_steps, incidence_angles, noise_sigma, projector_shadow,
+    apply_sensor_model,
+    depth_steps,
+    incidence_angles,
+    noise_sigma,
+    projector_shadow,
     steep_dropout,
 )
 
@@ -31,14 +35,19 @@ def sensor_cfg(name: str = "sr300", **overrides) -> NS:
 
 
 # Every missing-data mechanism off: only noise and quantisation remain.
-NO_DROPOUT = dict(projector_baseline=0.0, dropout_angle_deg=90.0, edge_dropout_prob=0.0,
-                  min_range=0.0, max_range=100.0)
+NO_DROPOUT = dict(
+    projector_baseline=0.0,
+    dropout_angle_deg=90.0,
+    edge_dropout_prob=0.0,
+    min_range=0.0,
+    max_range=100.0,
+)
 
 
 def test_sr300_yaml_has_every_schema_field():
     from dataclasses import fields
 
-    from pipeline.config.schema import SensorConfig
+    from pipeline.config.physical import SensorConfig
 
     names = {f.name for f in fields(SensorConfig)}
     for yaml in ("sr300", "ideal", "d435"):
@@ -118,6 +127,7 @@ def test_incidence_at_depth_step_takes_own_surface():
 
 # --- projector_shadow ------------------------------------------------------------------------
 
+
 def test_projector_shadow_left_of_box_for_positive_baseline():
     # Projector at +x, b = 0.025, fx = 400: fx · b = 10 px. Projector column u_p = u − 10 / z:
     # floor u − 14.286, box u − 20. A floor pixel left of the box is dark when its u_p exceeds
@@ -141,8 +151,7 @@ def test_projector_shadow_mirrors_for_negative_baseline():
     expected[5:15, 40:45] = True
     np.testing.assert_array_equal(shadow, expected)
     # Mirror the scene (column c → 59 − c, and cx = 29.5 → 29.5): b < 0 is b > 0 mirrored.
-    np.testing.assert_array_equal(
-        projector_shadow(z[:, ::-1], BOX_INTR, 0.025), shadow[:, ::-1])
+    np.testing.assert_array_equal(projector_shadow(z[:, ::-1], BOX_INTR, 0.025), shadow[:, ::-1])
 
 
 def test_projector_shadow_zero_baseline_and_no_data():
@@ -164,8 +173,9 @@ def test_projector_shadow_in_apply_sensor_model():
     # The SR300 config with noise and edge dropout off (θ ≤ 5° here, far below 60°): the band
     # of test_projector_shadow_left_of_box_for_positive_baseline is 0, the rest ideal depth
     # (0.7 and 0.5 are multiples of 1/8 mm: 5600 and 4000 steps).
-    cfg = sensor_cfg(noise_sigma_0=0.0, noise_sigma_2=0.0, noise_sigma_theta=0.0,
-                     edge_dropout_prob=0.0)
+    cfg = sensor_cfg(
+        noise_sigma_0=0.0, noise_sigma_2=0.0, noise_sigma_theta=0.0, edge_dropout_prob=0.0
+    )
     z = box_scene()
     out = apply_sensor_model(z, cfg, np.random.default_rng(0), BOX_INTR)
     expected = z.copy()
@@ -174,6 +184,7 @@ def test_projector_shadow_in_apply_sensor_model():
 
 
 # --- noise_sigma -----------------------------------------------------------------------------
+
 
 def test_noise_sigma_formula():
     cfg = sensor_cfg()  # σ0 = 0.0005, σ2 = 0.002, σθ = 0.0001
@@ -191,8 +202,11 @@ def test_noise_sigma_formula():
 def test_noise_sigma_without_angle_term_and_at_grazing():
     cfg = sensor_cfg(noise_sigma_theta=0.0)
     # σθ = 0: the angle does not matter.
-    np.testing.assert_allclose(noise_sigma(np.array([0.6, 0.6]), np.array([0.0, 1.5]), cfg),
-                               [0.0005 + 0.002 * 0.36] * 2, rtol=1e-12)
+    np.testing.assert_allclose(
+        noise_sigma(np.array([0.6, 0.6]), np.array([0.0, 1.5]), cfg),
+        [0.0005 + 0.002 * 0.36] * 2,
+        rtol=1e-12,
+    )
     # θ = π/2 is clamped to π/2 − 1e-3: finite.
     s = noise_sigma(np.array([0.6]), np.array([np.pi / 2]), sensor_cfg())
     assert np.isfinite(s).all()
@@ -200,14 +214,24 @@ def test_noise_sigma_without_angle_term_and_at_grazing():
 
 # --- steep_dropout ---------------------------------------------------------------------------
 
+
 def test_steep_dropout_probability_ramp():
     # SR300: p = 0 up to 60°, (θ − 60) / 18 between, 1 from 78°: 64.5° → 0.25, 69° → 0.5,
     # 73.5° → 0.75. 20,000 pixels per angle: the fraction's standard error ≤ √(0.25/20000) =
     # 0.0035; tolerance 0.02.
     cfg = sensor_cfg()
     rng = np.random.default_rng(1)
-    for deg, p in ((0.0, 0.0), (45.0, 0.0), (60.0, 0.0), (64.5, 0.25), (69.0, 0.5),
-                   (73.5, 0.75), (78.0, 1.0), (85.0, 1.0), (89.9, 1.0)):
+    for deg, p in (
+        (0.0, 0.0),
+        (45.0, 0.0),
+        (60.0, 0.0),
+        (64.5, 0.25),
+        (69.0, 0.5),
+        (73.5, 0.75),
+        (78.0, 1.0),
+        (85.0, 1.0),
+        (89.9, 1.0),
+    ):
         lost = steep_dropout(np.full((200, 100), np.radians(deg)), cfg, rng)
         assert lost.dtype == bool and lost.shape == (200, 100)
         if p in (0.0, 1.0):
@@ -237,6 +261,7 @@ def test_steep_dropout_hard_threshold():
 
 # --- depth_steps -----------------------------------------------------------------------------
 
+
 def test_depth_steps_hand_case():
     # A 5 × 5 plane at 0.6 m with a 2 cm bump at (2, 2): the bump and its four 4-neighbours
     # differ by 0.02 > 0.01; the diagonal pixels touch it only diagonally: not steps.
@@ -249,14 +274,13 @@ def test_depth_steps_hand_case():
     # A vertical step between columns 1 and 2 marks both columns, every row.
     z = np.full((3, 4), 0.6)
     z[:, 2:] = 0.55
-    np.testing.assert_array_equal(depth_steps(z, 0.01),
-                                  np.tile([False, True, True, False], (3, 1)))
+    np.testing.assert_array_equal(depth_steps(z, 0.01), np.tile([False, True, True, False], (3, 1)))
     # No data (0) next to data is a step (0.6 m ≫ 1 cm).
     z = np.full((3, 3), 0.6)
     z[0, 0] = 0.0
-    np.testing.assert_array_equal(depth_steps(z, 0.01),
-                                  [[True, True, False], [True, False, False],
-                                   [False, False, False]])
+    np.testing.assert_array_equal(
+        depth_steps(z, 0.01), [[True, True, False], [True, False, False], [False, False, False]]
+    )
 
 
 def test_edge_dropout_probability():
@@ -264,19 +288,27 @@ def test_edge_dropout_probability():
     # edge); with edge_dropout_prob = 1 all of them are lost, with 0.5 about half.
     z = box_scene()
     steps = depth_steps(z, 0.01)
-    cfg = sensor_cfg(noise_sigma_0=0.0, noise_sigma_2=0.0, noise_sigma_theta=0.0,
-                     projector_baseline=0.0, edge_dropout_prob=1.0)
+    cfg = sensor_cfg(
+        noise_sigma_0=0.0,
+        noise_sigma_2=0.0,
+        noise_sigma_theta=0.0,
+        projector_baseline=0.0,
+        edge_dropout_prob=1.0,
+    )
     out = apply_sensor_model(z, cfg, np.random.default_rng(0), BOX_INTR)
     np.testing.assert_array_equal(out == 0, steps)
     cfg.edge_dropout_prob = 0.5
-    fractions = [(apply_sensor_model(z, cfg, np.random.default_rng(s), BOX_INTR)[steps] == 0)
-                 .mean() for s in range(20)]
+    fractions = [
+        (apply_sensor_model(z, cfg, np.random.default_rng(s), BOX_INTR)[steps] == 0).mean()
+        for s in range(20)
+    ]
     assert not (apply_sensor_model(z, cfg, np.random.default_rng(0), BOX_INTR)[~steps] == 0).any()
     # 20 × 116 step pixels: standard error √(0.25 / 2320) = 0.010; tolerance 0.04.
     assert np.mean(fractions) == pytest.approx(0.5, abs=0.04)
 
 
 # --- quantisation and range ------------------------------------------------------------------
+
 
 def test_quantisation_to_multiples_of_the_step():
     # Columns of constant depth from 0.1 to 2.0 m; SR300 noise and 1/8 mm steps, range
@@ -287,8 +319,14 @@ def test_quantisation_to_multiples_of_the_step():
     intr = Intrinsics(8, 50, 4000.0, 4000.0, 3.5, 24.5)
     # Neighbouring columns differ by up to 0.5 m over a fraction of a millimetre, so their
     # incidence angles are near 90°: steep dropout and the angle term off here.
-    cfg = sensor_cfg(projector_baseline=0.0, edge_dropout_prob=0.0, dropout_angle_deg=90.0,
-                     noise_sigma_theta=0.0, min_range=0.2, max_range=1.5)
+    cfg = sensor_cfg(
+        projector_baseline=0.0,
+        edge_dropout_prob=0.0,
+        dropout_angle_deg=90.0,
+        noise_sigma_theta=0.0,
+        min_range=0.2,
+        max_range=1.5,
+    )
     out = apply_sensor_model(z, cfg, np.random.default_rng(3), intr)
     assert out.dtype == np.float32
     kept = np.array([False, False, True, True, True, True, False, False])
@@ -300,23 +338,33 @@ def test_quantisation_to_multiples_of_the_step():
     # ... and noisy: many distinct values per column.
     assert len(np.unique(out[:, 3])) > 10
     # Noise-free: 0.60049 / 0.000125 = 4803.92 → 4804 steps = 0.6005 m.
-    quiet = sensor_cfg(noise_sigma_0=0.0, noise_sigma_2=0.0, noise_sigma_theta=0.0,
-                       **NO_DROPOUT)
-    one = apply_sensor_model(np.array([[0.60049]], np.float32), quiet,
-                             np.random.default_rng(0), Intrinsics(1, 1, 400.0, 400.0, 0.0, 0.0))
+    quiet = sensor_cfg(noise_sigma_0=0.0, noise_sigma_2=0.0, noise_sigma_theta=0.0, **NO_DROPOUT)
+    one = apply_sensor_model(
+        np.array([[0.60049]], np.float32),
+        quiet,
+        np.random.default_rng(0),
+        Intrinsics(1, 1, 400.0, 400.0, 0.0, 0.0),
+    )
     assert one[0, 0] == np.float32(0.6005)
 
 
 def test_no_quantisation_when_step_is_zero():
-    cfg = sensor_cfg(noise_sigma_0=0.0, noise_sigma_2=0.0, noise_sigma_theta=0.0,
-                     quantisation_step=0.0, **NO_DROPOUT)
+    cfg = sensor_cfg(
+        noise_sigma_0=0.0,
+        noise_sigma_2=0.0,
+        noise_sigma_theta=0.0,
+        quantisation_step=0.0,
+        **NO_DROPOUT,
+    )
     z = np.full((4, 4), 0.60049, np.float32)
-    out = apply_sensor_model(z, cfg, np.random.default_rng(0), Intrinsics(4, 4, 400.0, 400.0,
-                                                                          1.5, 1.5))
+    out = apply_sensor_model(
+        z, cfg, np.random.default_rng(0), Intrinsics(4, 4, 400.0, 400.0, 1.5, 1.5)
+    )
     np.testing.assert_array_equal(out, z)
 
 
 # --- reproducibility and draw order ----------------------------------------------------------
+
 
 def test_same_seed_same_output():
     cfg = sensor_cfg()
@@ -340,7 +388,7 @@ def test_noise_is_the_first_draw():
     twin = np.random.default_rng(11)
     g = twin.normal(size=z.shape)
     z64 = z.astype(np.float64)
-    expected = (np.round((z64 + g * (0.0005 + 0.002 * z64 * z64)) / 0.000125) * 0.000125)
+    expected = np.round((z64 + g * (0.0005 + 0.002 * z64 * z64)) / 0.000125) * 0.000125
     np.testing.assert_allclose(out, expected.astype(np.float32), rtol=0, atol=1e-7)
     assert rng.bit_generator.state == twin.bit_generator.state
 
@@ -362,14 +410,18 @@ def test_draw_order_noise_steep_edge():
     theta = incidence_angles(z64, BOX_INTR)
     noisy = np.round((z64 + g * noise_sigma(z64, theta, cfg)) / 0.000125) * 0.000125
     p_steep = np.clip(np.degrees(theta) / 4.0, 0.0, 1.0)
-    lost = (projector_shadow(z64, BOX_INTR, 0.025) | (s < p_steep)
-            | (depth_steps(z64, 0.01) & (e < 0.5)))
+    lost = (
+        projector_shadow(z64, BOX_INTR, 0.025)
+        | (s < p_steep)
+        | (depth_steps(z64, 0.01) & (e < 0.5))
+    )
     assert 0 < (s < p_steep).sum() < z.size  # the steep draw matters here
     expected = np.where(lost, 0.0, noisy).astype(np.float32)
     np.testing.assert_allclose(out, expected, rtol=0, atol=1e-7)
 
 
 # --- holes, calibration error, randomised models ------------------------------------------------
+
 
 def test_hole_mask_blocks_by_hand():
     """A 5 × 7 image in 2-pixel blocks: 3 × 4 blocks, each lost when its uniform < rate. rate 0:
@@ -392,8 +444,15 @@ def test_bias_and_scale_error_by_hand():
     pixels without data stay 0."""
     z = np.full((41, 41), 0.5, np.float32)
     z[0, 0] = 0.0
-    cfg = sensor_cfg(**NO_DROPOUT, noise_sigma_0=0.0, noise_sigma_2=0.0, noise_sigma_theta=0.0,
-                     quantisation_step=0.0, depth_bias=0.002, depth_scale_error=0.01)
+    cfg = sensor_cfg(
+        **NO_DROPOUT,
+        noise_sigma_0=0.0,
+        noise_sigma_2=0.0,
+        noise_sigma_theta=0.0,
+        quantisation_step=0.0,
+        depth_bias=0.002,
+        depth_scale_error=0.01,
+    )
     out = apply_sensor_model(z, cfg, np.random.default_rng(0), CENTRED)
     assert out[0, 0] == 0.0
     assert np.allclose(out[1:, 1:], 0.507, atol=1e-6)
@@ -401,29 +460,47 @@ def test_bias_and_scale_error_by_hand():
 
 def test_randomised_sensors_stay_in_their_ranges():
     from pipeline.camera.randomise import check_randomisation, draw_sensor
-    from pipeline.cli import compose
+    from pipeline.runtime.cli import compose
 
-    rand = OmegaConf.to_object(compose("generate", ["experiment=smoke"])).generate \
-        .camera_randomisation
+    rand = OmegaConf.to_object(
+        compose("generate", ["experiment=smoke"])
+    ).generate.camera_randomisation
     check_randomisation(rand)
     rng = np.random.default_rng(0)
     drawn = [draw_sensor(rand, rng) for _ in range(400)]
     models = [d for d in drawn if d is not None]
-    assert 0.5 * (1 - rand.ideal_fraction) < len(models) / len(drawn) < 1.5 * (
-        1 - rand.ideal_fraction)
+    assert (
+        0.5 * (1 - rand.ideal_fraction) < len(models) / len(drawn) < 1.5 * (1 - rand.ideal_fraction)
+    )
     for m in models:
         assert m.enabled and m.dropout_angle_deg < 90
-        for key in ("noise_sigma_0", "noise_sigma_2", "hole_rate", "depth_bias",
-                    "depth_scale_error", "projector_baseline", "edge_dropout_prob"):
+        for key in (
+            "noise_sigma_0",
+            "noise_sigma_2",
+            "hole_rate",
+            "depth_bias",
+            "depth_scale_error",
+            "projector_baseline",
+            "edge_dropout_prob",
+        ):
             lo, hi = getattr(rand, key)
             assert lo <= getattr(m, key) <= hi
         assert rand.hole_size_px[0] <= m.hole_size_px <= rand.hole_size_px[1]
     # every camera profile lies inside the ranges
     for name in ("sr300", "d435"):
         sr = sensor_cfg(name)
-        for key in ("noise_sigma_0", "noise_sigma_2", "noise_sigma_theta", "projector_baseline",
-                    "edge_dropout_prob", "quantisation_step", "hole_rate", "depth_bias",
-                    "depth_scale_error", "dropout_angle_start_deg"):
+        for key in (
+            "noise_sigma_0",
+            "noise_sigma_2",
+            "noise_sigma_theta",
+            "projector_baseline",
+            "edge_dropout_prob",
+            "quantisation_step",
+            "hole_rate",
+            "depth_bias",
+            "depth_scale_error",
+            "dropout_angle_start_deg",
+        ):
             lo, hi = getattr(rand, key)
             assert lo <= getattr(sr, key) <= hi, (name, key)
         # the angle where dropout is certain lies in the drawn range (the SR300's 18 deg ramp is
@@ -434,9 +511,10 @@ def test_randomised_sensors_stay_in_their_ranges():
         if sr.hole_rate > 0:
             assert rand.hole_size_px[0] <= sr.hole_size_px <= rand.hole_size_px[1]
     import dataclasses
+
     with pytest.raises(ValueError, match="below 90"):
         check_randomisation(dataclasses.replace(rand, dropout_angle_span_deg=[5.0, 40.0]))
-    from pipeline.generate import check_splits
+    from pipeline.stages.generate import check_splits
 
     with pytest.raises(ValueError, match="camera_randomisation.splits"):
         check_splits("generate.camera_randomisation.splits", ["training"])

@@ -12,12 +12,20 @@ import math
 import numpy as np
 import pybullet as p
 import pytest
-
 from conftest import default_config
-from pipeline.robot import Robot, RobotConfig, target_camera_pose
-from pipeline.servo.control import (ServoConfig, clamp_twist, current_features,
-                                    interaction_matrix, rotation_error, servo_velocity,
-                                    target_features, warp_axis)
+
+from pipeline.robot.model import Robot, RobotConfig
+from pipeline.robot.target_pose import target_camera_pose
+from pipeline.servo.control import (
+    ServoConfig,
+    clamp_twist,
+    current_features,
+    interaction_matrix,
+    rotation_error,
+    servo_velocity,
+    target_features,
+    warp_axis,
+)
 from pipeline.servo.jacobian import camera_jacobian, integrate, joint_velocities
 
 DT = 1.0 / 30.0
@@ -60,10 +68,10 @@ def test_target_features_follow_eq_17_18():
     cfg = SERVO
     # p_e* = [0, off/d*, log d*], off = -0.035 (L), 0 (B), +0.035 (R).
     for pattern, off in (("L", -0.035), ("B", 0.0), ("R", 0.035)):
-        np.testing.assert_allclose(target_features(pattern, cfg),
-                                   [0, off / 0.15, math.log(0.15)], atol=1e-15)
-    np.testing.assert_allclose(current_features([0.03, -0.06, 0.3]),
-                               [0.1, -0.2, math.log(0.3)])
+        np.testing.assert_allclose(
+            target_features(pattern, cfg), [0, off / 0.15, math.log(0.15)], atol=1e-15
+        )
+    np.testing.assert_allclose(current_features([0.03, -0.06, 0.3]), [0.1, -0.2, math.log(0.3)])
 
 
 def test_target_features_match_the_target_camera_pose():
@@ -72,8 +80,9 @@ def test_target_features_match_the_target_camera_pose():
     for pattern in "LBR":
         T = target_camera_pose(c, n, X_AXIS, pattern)
         c_t = T[:3, :3].T @ (c - T[:3, 3])
-        np.testing.assert_allclose(current_features(c_t), target_features(pattern, SERVO),
-                                   atol=1e-12)
+        np.testing.assert_allclose(
+            current_features(c_t), target_features(pattern, SERVO), atol=1e-12
+        )
 
 
 # ----------------------------------------------------------------------------- control law
@@ -101,8 +110,7 @@ def test_far_centre_moves_the_camera_forward():
     # Continuous gain λ = 0.4/s: V_z = 0.4 · 0.3 · 0.6931 = 0.08318 m/s.
     cfg = dataclasses.replace(SERVO, gain_per_step=False)
     cmd = servo_velocity([0, 0, 0.30], FACING, X_AXIS, Y_AXIS, "B", cfg)
-    np.testing.assert_allclose(cmd.velocity, [0, 0, 0.4 * 0.3 * math.log(2), 0, 0, 0],
-                               atol=1e-12)
+    np.testing.assert_allclose(cmd.velocity, [0, 0, 0.4 * 0.3 * math.log(2), 0, 0, 0], atol=1e-12)
     assert cmd.velocity[2] > 0
 
 
@@ -116,8 +124,7 @@ def test_rotation_is_compensated_by_translation():
     n_towards = -np.array([math.sin(a), 0, math.cos(a)])
     cfg = dataclasses.replace(SERVO, gain_per_step=False)
     cmd = servo_velocity([0, 0, D_STAR], n_towards, X_AXIS, Y_AXIS, "B", cfg)
-    np.testing.assert_allclose(cmd.velocity, [-0.4 * D_STAR * a, 0, 0, 0, 0.4 * a, 0],
-                               atol=1e-12)
+    np.testing.assert_allclose(cmd.velocity, [-0.4 * D_STAR * a, 0, 0, 0, 0.4 * a, 0], atol=1e-12)
 
 
 def test_gain_per_step_needs_dt():
@@ -155,14 +162,17 @@ def test_u_theta_treats_axes_as_lines():
     # (the short axis at 80° / 260° is farther from X, 80°).
     ref = rotation_error(FACING, _in_plane(350), _in_plane(80))
     np.testing.assert_allclose(ref, [0, 0, math.radians(10)], atol=1e-12)
-    np.testing.assert_allclose(rotation_error(FACING, _in_plane(170), _in_plane(260)), ref,
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        rotation_error(FACING, _in_plane(170), _in_plane(260)), ref, atol=1e-12
+    )
     # The short axis wins when its line is nearer: long at 60°, short at 150° (= -30°) → +30°.
-    np.testing.assert_allclose(rotation_error(FACING, _in_plane(60), _in_plane(150)),
-                               [0, 0, math.radians(30)], atol=1e-12)
+    np.testing.assert_allclose(
+        rotation_error(FACING, _in_plane(60), _in_plane(150)), [0, 0, math.radians(30)], atol=1e-12
+    )
     # Lengths do not matter.
-    np.testing.assert_allclose(rotation_error(FACING, 3 * _in_plane(350), 0.2 * _in_plane(80)),
-                               ref, atol=1e-12)
+    np.testing.assert_allclose(
+        rotation_error(FACING, 3 * _in_plane(350), 0.2 * _in_plane(80)), ref, atol=1e-12
+    )
 
 
 def test_warp_axis_brings_in_surface_axes_to_the_image_plane():
@@ -170,8 +180,9 @@ def test_warp_axis_brings_in_surface_axes_to_the_image_plane():
     # normal (sin 20°, 0, cos 20°)) warps to X; the other in-plane axis, y, stays y.
     a = math.radians(20)
     n_towards = -np.array([math.sin(a), 0, math.cos(a)])
-    np.testing.assert_allclose(warp_axis([math.cos(a), 0, -math.sin(a)], n_towards), X_AXIS,
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        warp_axis([math.cos(a), 0, -math.sin(a)], n_towards), X_AXIS, atol=1e-12
+    )
     np.testing.assert_allclose(warp_axis(Y_AXIS, n_towards), Y_AXIS, atol=1e-12)
     np.testing.assert_allclose(warp_axis(_in_plane(40), FACING), _in_plane(40), atol=1e-12)
 
@@ -230,8 +241,15 @@ def test_kinematic_camera_converges():
     for k in range(60):
         center = R.T @ (c_w - t)
         normal = R.T @ n_w
-        cmd = servo_velocity(center, normal, warp_axis(R.T @ long_w, normal),
-                             warp_axis(R.T @ short_w, normal), "L", cfg, DT)
+        cmd = servo_velocity(
+            center,
+            normal,
+            warp_axis(R.T @ long_w, normal),
+            warp_axis(R.T @ short_w, normal),
+            "L",
+            cfg,
+            DT,
+        )
         errors.append(np.linalg.norm(cmd.error))
         if cmd.converged:
             converged_at = k
@@ -277,8 +295,11 @@ def _fd_jacobian(robot, q, eps=3e-3):
 
 def test_camera_jacobian_matches_finite_differences(robot):
     home = robot.home_q()
-    q_rand = np.clip(home + np.random.default_rng(0).normal(0, 0.4, 7),
-                     robot.joint_limits[:, 0], robot.joint_limits[:, 1])
+    q_rand = np.clip(
+        home + np.random.default_rng(0).normal(0, 0.4, 7),
+        robot.joint_limits[:, 0],
+        robot.joint_limits[:, 1],
+    )
     for q in (home, q_rand):
         J = camera_jacobian(robot, q)
         assert J.shape == (6, 7)
@@ -296,8 +317,7 @@ def test_joint_step_moves_the_camera_by_the_twist(robot):
     T1 = robot.camera_pose(q1)
     # Displacement in the start camera frame ≈ V dt (1.1 mm); rotation ≈ Ω dt (3.7 mrad);
     # the Euler step's second-order error is ~|Ω dt| · |V dt| ≈ 4e-6 m.
-    np.testing.assert_allclose(T0[:3, :3].T @ (T1[:3, 3] - T0[:3, 3]), twist[:3] * dt,
-                               atol=2e-5)
+    np.testing.assert_allclose(T0[:3, :3].T @ (T1[:3, 3] - T0[:3, 3]), twist[:3] * dt, atol=2e-5)
     np.testing.assert_allclose(_log(T0[:3, :3].T @ T1[:3, :3]), twist[3:] * dt, atol=5e-5)
 
 

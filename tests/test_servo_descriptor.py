@@ -9,14 +9,13 @@ At z = 0.5 m one pixel is 0.5 / 411.7 = 1.21 mm.
 from __future__ import annotations
 
 import dataclasses
-
 from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import default_config
 from omegaconf import OmegaConf
 
-from conftest import default_config
 from pipeline.camera.geometry import Intrinsics, project
 from pipeline.camera.sensor import apply_sensor_model
 from pipeline.servo.descriptor import DescriptorConfig, describe_surface
@@ -37,8 +36,13 @@ def descriptor(**overrides) -> DescriptorConfig:
 
 def rect(center, axis_a, axis_b, half_a, half_b):
     """A planar rectangle: centre, two orthonormal in-plane axes and half-lengths along them."""
-    return (np.asarray(center, float), np.asarray(axis_a, float), np.asarray(axis_b, float),
-            half_a, half_b)
+    return (
+        np.asarray(center, float),
+        np.asarray(axis_a, float),
+        np.asarray(axis_b, float),
+        half_a,
+        half_b,
+    )
 
 
 def render(rects, floor_z=FLOOR_Z, intr=SR300):
@@ -46,8 +50,10 @@ def render(rects, floor_z=FLOOR_Z, intr=SR300):
     floor at ``floor_z`` (None: no data)."""
     u = np.arange(intr.width)[None, :]
     v = np.arange(intr.height)[:, None]
-    r = np.stack(np.broadcast_arrays((u - intr.cx) / intr.fx, (v - intr.cy) / intr.fy,
-                                     np.ones((1, 1))), axis=-1)  # (H, W, 3)
+    r = np.stack(
+        np.broadcast_arrays((u - intr.cx) / intr.fx, (v - intr.cy) / intr.fy, np.ones((1, 1))),
+        axis=-1,
+    )  # (H, W, 3)
     depth = np.full((intr.height, intr.width), np.inf if floor_z is None else floor_z)
     hits = []
     for c, a, b, ha, hb in rects:
@@ -108,8 +114,7 @@ def test_tilted_rectangle_normal_centre_axes_lengths():
         assert w[2] == 0.0 and np.linalg.norm(w) == pytest.approx(1.0, abs=1e-12)
     # The paper's settings only (plain window SVD, no rim, no refit; 8-connected): same plane,
     # same centre; the region loses its one-pixel rim, so the lengths are ~2 px (2.5 mm) shorter.
-    paper = descriptor(window_hypotheses=0, window_refits=0, rim=0, refine=False,
-                             connectivity=8)
+    paper = descriptor(window_hypotheses=0, window_refits=0, rim=0, refine=False, connectivity=8)
     fp, _ = describe_surface(depth, SR300, seed, paper)
     assert np.degrees(np.arccos(np.clip(fp.normal_cam @ n_true, -1, 1))) < 0.5
     np.testing.assert_allclose(fp.normal_cam, fp.plane[:3])
@@ -222,7 +227,8 @@ def test_a_seed_in_a_sensor_hole_keeps_the_face_around_it():
 
 def test_region_stops_at_crease_between_level_and_tilted_box():
     # B touches A along x = 0 at the same height and goes down at 20°: points
-    # (t cos 20°, y, 0.5 + t sin 20°), t ∈ [0, 0.10]; normal towards the camera (sin 20°, 0, −cos 20°).
+    # (t cos 20°, y, 0.5 + t sin 20°), t ∈ [0, 0.10]; normal towards the camera (sin 20°, 0, −cos
+    # 20°).
     box_b = rect([0.05 * C20, 0.0, 0.5 + 0.05 * S20], [C20, 0, S20], [0, 1, 0], 0.05, 0.05)
     depth, hits = render([BOX_A, box_b])
     assert hits[0].sum() == A_PIXELS
@@ -249,12 +255,16 @@ def test_failures_have_reasons():
     holed = depth.copy()
     holed[195:206, 155:166] = 0.0  # an 11 x 11 hole around the seed
     assert describe_surface(holed, SR300, (160, 200), descriptor(seed_repair=False)) == (
-        None, "no_depth_at_seed")
+        None,
+        "no_depth_at_seed",
+    )
     holed[185:216, 145:176] = 0.0  # a hole larger than the 21 x 21 window: nothing to repair
     assert describe_surface(holed, SR300, (160, 200), descriptor()) == (None, "no_depth_at_seed")
     # Region of 6724 pixels < min_pixels.
     assert describe_surface(depth, SR300, (160, 200), descriptor(min_pixels=7000)) == (
-        None, "region_too_small")
+        None,
+        "region_too_small",
+    )
     # A 6 × 6-pixel patch in an image without data elsewhere: the window holds its 36 points
     # (≥ 10), so the plane is fitted; n_p exists only at the inner 4 × 4, the rim brings back
     # the rest: 36 pixels < 50.
@@ -264,7 +274,10 @@ def test_failures_have_reasons():
     # 3 × 3 = 9 window points < 10.
     patch[:] = 0.0
     patch[100:103, 100:103] = 0.5
-    assert describe_surface(patch, SR300, (101, 101), descriptor()) == (None, "too_few_window_points")
+    assert describe_surface(patch, SR300, (101, 101), descriptor()) == (
+        None,
+        "too_few_window_points",
+    )
 
 
 def _step_image():
@@ -290,7 +303,7 @@ def test_seed_near_a_face_edge_over_a_13cm_step_keeps_its_face():
         assert feats is not None, (seed, reason)
         assert feats.normal_cam == pytest.approx([0, 0, -1], abs=1e-3)
         assert feats.center_px == pytest.approx([199.5, 199.5], abs=0.5)
-        assert feats.area == pytest.approx(100 ** 2 * (0.5 / 411.7) ** 2, rel=0.03)
+        assert feats.area == pytest.approx(100**2 * (0.5 / 411.7) ** 2, rel=0.03)
 
 
 def test_a_one_pixel_outlier_at_the_seed_keeps_the_face():
@@ -304,7 +317,7 @@ def test_a_one_pixel_outlier_at_the_seed_keeps_the_face():
     depth[200, 200] = 0.5006
     feats, reason = describe_surface(depth, intr, (200, 200), descriptor())
     assert feats is not None, reason
-    assert feats.area == pytest.approx(100 ** 2 * (0.5 / 411.7) ** 2, rel=0.03)
+    assert feats.area == pytest.approx(100**2 * (0.5 / 411.7) ** 2, rel=0.03)
 
 
 def test_window_tolerance_shrinks_with_depth_close_to_the_face():
@@ -322,8 +335,9 @@ def test_window_tolerance_shrinks_with_depth_close_to_the_face():
     depth[corner] = (0.1585 + 0.0023 * (v - 122))[corner]
     feats, reason = describe_surface(depth, intr, (208, 121), descriptor())
     assert feats is None and reason == "region_too_small"  # the paper's fixed ε1
-    feats, reason = describe_surface(depth, intr, (208, 121),
-                                     descriptor(window_tolerance_depth=0.6))
+    feats, reason = describe_surface(
+        depth, intr, (208, 121), descriptor(window_tolerance_depth=0.6)
+    )
     assert feats is not None, reason
     assert feats.normal_cam == pytest.approx([0, 0, -1], abs=1e-3)
 
@@ -366,11 +380,13 @@ def test_a_tracked_seed_that_slid_onto_the_next_face_keeps_the_tracked_face():
     # than a tracking tolerance of 10°: "surface_changed". 50° off: nothing grows at all.
     t = np.radians(12)
     off = np.array([np.sin(t), 0.0, -np.cos(t)])
-    assert describe_surface(depth, SR300, seed, descriptor(track_normal_deg=10.0),
-                            expected_normal_cam=off) == (None, "surface_changed")
+    assert describe_surface(
+        depth, SR300, seed, descriptor(track_normal_deg=10.0), expected_normal_cam=off
+    ) == (None, "surface_changed")
     t = np.radians(50)
-    assert describe_surface(depth, SR300, seed, cfg, expected_normal_cam=[
-        0, np.sin(t), -np.cos(t)]) == (None, "no_region_at_seed")
+    assert describe_surface(
+        depth, SR300, seed, cfg, expected_normal_cam=[0, np.sin(t), -np.cos(t)]
+    ) == (None, "no_region_at_seed")
     # tracking off (the paper): the expected normal is ignored
     f, _ = describe_surface(depth, SR300, seed, descriptor(), expected_normal_cam=[0, 0, -1])
     assert angle_deg(f.normal_cam, [s45, 0, -c45]) < 0.5
@@ -380,7 +396,7 @@ def test_split_region_is_the_voronoi_cell_of_the_first_site():
     # Points on the x axis at 0, 1, 2, 3, 4 cm (in cm: exact in floating point); sites at 1 cm
     # (first) and 3 cm: the bisector is x = 2 cm, equidistant, and stays with the first site.
     pts = np.array([[0.0, 0, 0], [1.0, 0, 0], [2.0, 0, 0], [3.0, 0, 0], [4.0, 0, 0]])
-    from pipeline.servo.descriptor import split_region
+    from pipeline.servo.region import split_region
 
     keep = split_region(pts, np.array([[1.0, 0, 0], [3.0, 0, 0]]))
     assert keep.tolist() == [True, True, True, False, False]
@@ -421,7 +437,7 @@ def test_tracking_keeps_the_plane_not_only_its_orientation():
     (normal (0, 0, -1)) takes the larger slab, the floor: offset n · P = -0.50. With a point of
     the tracked top carried into the frame (z = 0.431) and 1 cm of tolerance, the plane is the
     top's (-0.43); with the tracked plane 3 cm from either slab, it is the tracked plane itself."""
-    from pipeline.servo.descriptor import _tracked_plane
+    from pipeline.servo.region import tracked_plane
 
     cfg = default_config(DescriptorConfig)
     rng = np.random.default_rng(0)
@@ -430,10 +446,10 @@ def test_tracking_keeps_the_plane_not_only_its_orientation():
     win = np.vstack([floor, top])
     seed = np.array([0.0, 0.0, 0.43])
     n_down = np.array([0.0, 0.0, -1.0])
-    n, c = _tracked_plane(win, seed, cfg, n_down)
+    n, c = tracked_plane(win, seed, cfg, n_down)
     assert n == pytest.approx(n_down) and c == pytest.approx(-0.50)
     cfg = dataclasses.replace(cfg, track_offset_m=0.01)
-    n, c = _tracked_plane(win, seed, cfg, n_down, np.array([0.01, 0.0, 0.431]))
+    n, c = tracked_plane(win, seed, cfg, n_down, np.array([0.01, 0.0, 0.431]))
     assert c == pytest.approx(-0.43)
-    n, c = _tracked_plane(win, seed, cfg, n_down, np.array([0.0, 0.0, 0.46]))
+    n, c = tracked_plane(win, seed, cfg, n_down, np.array([0.0, 0.0, 0.46]))
     assert c == pytest.approx(-0.46)

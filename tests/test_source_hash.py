@@ -1,23 +1,27 @@
 """A stage's version covers the source it depends on (its import closure), not all of pipeline/."""
 
-from pipeline.artifacts.fingerprint import import_closure, source_hash
+from pipeline.artifacts.fingerprint import import_closure, source_hash, stage_module
 
 
 def test_generation_depends_on_the_simulator_not_on_the_planners():
-    closure = import_closure("pipeline.generate")
-    assert {"pipeline.generate", "pipeline.simulation.heap", "pipeline.camera.render",
-            "pipeline.dataset.storage"} <= set(closure)
-    assert not any(m.startswith(("pipeline.planner", "pipeline.dexnet", "pipeline.labelling"))
-                   for m in closure)
+    closure = import_closure("pipeline.stages.generate")
+    assert {
+        "pipeline.stages.generate",
+        "pipeline.simulation.heap",
+        "pipeline.camera.render",
+        "pipeline.dataset.storage",
+    } <= set(closure)
+    assert not any(
+        m.startswith(("pipeline.planner", "pipeline.dexnet", "pipeline.labelling")) for m in closure
+    )
 
 
 def test_imports_inside_functions_count():
-    # pipeline.label imports the robot checker inside a function (lazily).
-    assert "pipeline.labelling.robot_check" in import_closure("pipeline.label")
+    # pipeline.stages.label imports the robot checker inside a function (lazily).
+    assert "pipeline.labelling.robot_check" in import_closure("pipeline.stages.label")
 
 
-STAGES = ("generate", "label", "train", "baseline", "evaluate", "unseen", "ablation",
-          "robustness")
+STAGES = ("generate", "label", "train", "baseline", "evaluate", "unseen", "ablation", "robustness")
 
 
 def test_no_stage_module_is_a_library():
@@ -25,8 +29,11 @@ def test_no_stage_module_is_a_library():
     except the ablation, which runs the evaluate stage itself once per variant."""
     runs_as_stage = {("ablation", "evaluate")}
     for stage in STAGES:
-        imported = {m.split(".")[1] for m in import_closure(f"pipeline.{stage}")
-                    if m.count(".") == 1} & set(STAGES) - {stage}
+        imported = {
+            m.rpartition(".")[2]
+            for m in import_closure(stage_module(stage))
+            if m.startswith("pipeline.stages.")
+        } & set(STAGES) - {stage}
         assert {(stage, other) for other in imported} <= runs_as_stage, (stage, imported)
 
 
@@ -38,14 +45,14 @@ def test_stage_hashes_differ_and_are_stable():
 
 
 def test_executor_is_plumbing(tmp_path, monkeypatch):
-    """Where shards run (pipeline.executor) does not change a result: not in the source hash."""
+    """Where shards run (pipeline.runtime.executor) does not change a result: not in the source
+    hash."""
     import shutil
 
     from pipeline.artifacts import fingerprint
 
     root = tmp_path / "pipeline"
-    shutil.copytree(fingerprint.PACKAGE_ROOT, root,
-                    ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copytree(fingerprint.PACKAGE_ROOT, root, ignore=shutil.ignore_patterns("__pycache__"))
     monkeypatch.setattr(fingerprint, "PACKAGE_ROOT", root)
 
     def hashes():
@@ -54,12 +61,12 @@ def test_executor_is_plumbing(tmp_path, monkeypatch):
         return {s: source_hash(s) for s in ("generate", "label")}
 
     try:
-        assert "pipeline.executor" in import_closure("pipeline.generate")
+        assert "pipeline.runtime.executor" in import_closure("pipeline.stages.generate")
         before = hashes()
-        with open(root / "executor.py", "a") as f:
+        with open(root / "runtime" / "executor.py", "a") as f:
             f.write("\n# an edit\n")
         assert hashes() == before
-        with open(root / "generate.py", "a") as f:
+        with open(root / "stages" / "generate.py", "a") as f:
             f.write("\n# an edit\n")
         assert hashes()["generate"] != before["generate"]
     finally:

@@ -12,7 +12,12 @@ import pytest
 from omegaconf import OmegaConf
 
 from pipeline.artifacts.store import (
-    ArtifactError, ArtifactWriter, load_manifest, resolve_artifact, run_stage, verify_artifact,
+    ArtifactError,
+    ArtifactWriter,
+    load_manifest,
+    resolve_artifact,
+    run_stage,
+    verify_artifact,
 )
 from pipeline.camera.geometry import Intrinsics
 from pipeline.camera.sensor import apply_sensor_model
@@ -78,9 +83,16 @@ def test_sensor_noise_grows_with_depth_squared():
 def test_sensor_drops_only_edge_pixels_and_quantises():
     depth = np.full((10, 10), 0.6, np.float32)
     depth[:, 5:] = 0.55  # a 5 cm step between columns 4 and 5
-    cfg = sensor_cfg("sr300", noise_sigma_0=0.0, noise_sigma_2=0.0, noise_sigma_theta=0.0,
-                     projector_baseline=0.0, dropout_angle_deg=90.0, edge_dropout_prob=1.0,
-                     quantisation_step=0.001)
+    cfg = sensor_cfg(
+        "sr300",
+        noise_sigma_0=0.0,
+        noise_sigma_2=0.0,
+        noise_sigma_theta=0.0,
+        projector_baseline=0.0,
+        dropout_angle_deg=90.0,
+        edge_dropout_prob=1.0,
+        quantisation_step=0.001,
+    )
     intr = Intrinsics(10, 10, 400.0, 400.0, 4.5, 4.5)
     out = apply_sensor_model(depth, cfg, np.random.default_rng(0), intr)
     assert out.dtype == np.float32 and out.shape == depth.shape
@@ -95,8 +107,12 @@ def test_sensor_drops_only_edge_pixels_and_quantises():
 def test_sensor_rejects_image_of_wrong_shape():
     depth = np.full((10, 12), 0.6, np.float32)
     with pytest.raises(ValueError, match="expected"):
-        apply_sensor_model(depth, sensor_cfg("sr300"), np.random.default_rng(0),
-                           Intrinsics(12, 12, 400.0, 400.0, 5.5, 5.5))
+        apply_sensor_model(
+            depth,
+            sensor_cfg("sr300"),
+            np.random.default_rng(0),
+            Intrinsics(12, 12, 400.0, 400.0, 5.5, 5.5),
+        )
 
 
 def test_writer_failure_cleans_up_and_keeps_old(tmp_path):

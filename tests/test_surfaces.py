@@ -13,23 +13,28 @@ from types import SimpleNamespace as NS
 import numpy as np
 import pybullet as p
 import pytest
-
 from conftest import default_config
+
 from pipeline.camera.geometry import Intrinsics, camera_pose_above_bin, pose_matrix, project
 from pipeline.camera.render import render_depth
-from pipeline.dataset.scenes import Box
-from pipeline.labelling.surfaces import (
-    SurfaceDetectionConfig, aggregate, detect_surfaces, match_surfaces, true_visible_faces,
-)
-from pipeline.labelling.types import Surface
 from pipeline.cell.bin import build_cell
+from pipeline.dataset.scenes import Box
+from pipeline.grasping.surfaces import SurfaceDetectionConfig, detect_surfaces
+from pipeline.grasping.types import Surface
+from pipeline.labelling.surface_truth import aggregate, match_surfaces, true_visible_faces
 from pipeline.simulation.scene import connect
 
 SR300 = Intrinsics(416, 416, 411.7, 411.7, 207.5, 207.5)
 CAM_HEIGHT = 0.625
 T_WORLD_CAM = camera_pose_above_bin(CAM_HEIGHT)
-BIN = NS(inner_length_x=0.40, inner_width_y=0.30, wall_height=0.15, wall_thickness=0.01,
-         floor_thickness=0.02, lateral_friction=0.5)
+BIN = NS(
+    inner_length_x=0.40,
+    inner_width_y=0.30,
+    wall_height=0.15,
+    wall_thickness=0.01,
+    floor_thickness=0.02,
+    lateral_friction=0.5,
+)
 PHYS = NS(gravity=-9.81, time_step=1 / 240, solver_iterations=50, friction_anchor=True)
 FLAT = (0.12, 0.075, 0.023)
 SURFACES = default_config(SurfaceDetectionConfig)  # conf/surfaces/ransac.yaml
@@ -46,8 +51,9 @@ def _add_box(client, size, position, quat=(0, 0, 0, 1)) -> int:
     half = [s / 2 for s in size]
     col = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client)
     vis = p.createVisualShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client)
-    return p.createMultiBody(0, col, vis, basePosition=position, baseOrientation=quat,
-                             physicsClientId=client)
+    return p.createMultiBody(
+        0, col, vis, basePosition=position, baseOrientation=quat, physicsClientId=client
+    )
 
 
 def _render_box(client, size, position, quat, occluders=()):
@@ -59,8 +65,14 @@ def _render_box(client, size, position, quat, occluders=()):
     frame = render_depth(client, SR300, T_WORLD_CAM, 0.1, 2.0, renderer="raycast")
     mask = (frame.body_ids == body).astype(np.uint8)
     T_world_box = pose_matrix(np.asarray(position, float), np.asarray(quat, float))
-    box = Box(instance=1, type_index=0, type_name="flat", size=np.asarray(size, float),
-              T_world_box=T_world_box, T_cam_box=np.linalg.inv(T_WORLD_CAM) @ T_world_box)
+    box = Box(
+        instance=1,
+        type_index=0,
+        type_name="flat",
+        size=np.asarray(size, float),
+        T_world_box=T_world_box,
+        T_cam_box=np.linalg.inv(T_WORLD_CAM) @ T_world_box,
+    )
     return frame.depth_m, mask, box
 
 
@@ -168,8 +180,13 @@ def test_occluded_face_keeps_largest_region(client):
     y ∈ [−0.0575, 0.0175]: the larger patch is x ∈ [−0.03, 0.06228], centre x = 0.01614,
     92.3 mm × 75 mm → camera centre (0.01614, 0.02, 0.602).
     """
-    depth, mask, box = _render_box(client, FLAT, [0.03, -0.02, 0.0115], (0, 0, 0, 1),
-                                   occluders=[((0.01, 0.2, 0.01), [0.065, -0.02, 0.05])])
+    depth, mask, box = _render_box(
+        client,
+        FLAT,
+        [0.03, -0.02, 0.0115],
+        (0, 0, 0, 1),
+        occluders=[((0.01, 0.2, 0.01), [0.065, -0.02, 0.05])],
+    )
     surfaces = detect_surfaces(depth, mask, SR300, SURFACES)
     assert len(surfaces) == 1
     s = surfaces[0]
@@ -225,10 +242,18 @@ def test_fronto_parallel_square_by_hand():
 def _surface(instance, centre, normal=(0, 0, -1)) -> Surface:
     centre, normal = np.asarray(centre, float), np.asarray(normal, float)
     normal = normal / np.linalg.norm(normal)
-    return Surface(instance=instance, center_cam=centre, normal_cam=normal,
-                   long_axis_cam=np.array([1.0, 0, 0]), short_axis_cam=np.array([0, -1.0, 0]),
-                   long_length=0.1, short_length=0.05, center_px=project(centre, SR300),
-                   num_points=500, area=0.005)
+    return Surface(
+        instance=instance,
+        center_cam=centre,
+        normal_cam=normal,
+        long_axis_cam=np.array([1.0, 0, 0]),
+        short_axis_cam=np.array([0, -1.0, 0]),
+        long_length=0.1,
+        short_length=0.05,
+        center_px=project(centre, SR300),
+        num_points=500,
+        area=0.005,
+    )
 
 
 def test_match_surfaces_by_hand():
@@ -236,10 +261,10 @@ def test_match_surfaces_by_hand():
     truth = [_surface(1, [0, 0, 0.5]), _surface(1, [0.05, 0, 0.5]), _surface(2, [0, 0.1, 0.5])]
     detected = [
         _surface(1, [0.001, 0, 0.5], tilt10),  # T0: 1 mm, 10°
-        _surface(1, [0.0505, 0, 0.5]),         # T1: 0.5 mm
-        _surface(2, [0.03, 0.1, 0.5]),         # 30 mm from T2: too far
-        _surface(1, [0.003, 0, 0.5]),          # 3 mm from T0, but T0 goes to the closer one
-        _surface(3, [0, 0, 0.5]),              # no true surface of instance 3
+        _surface(1, [0.0505, 0, 0.5]),  # T1: 0.5 mm
+        _surface(2, [0.03, 0.1, 0.5]),  # 30 mm from T2: too far
+        _surface(1, [0.003, 0, 0.5]),  # 3 mm from T0, but T0 goes to the closer one
+        _surface(3, [0, 0, 0.5]),  # no true surface of instance 3
         _surface(1, [0.05, 0, 0.5], (0, np.sin(0.5), -np.cos(0.5))),  # 28.6° off T1's normal
     ]
     m = match_surfaces(detected, truth)
@@ -267,8 +292,10 @@ def smoke_scenes(smoke_pipeline):
     from pipeline.dataset.scenes import SceneDataset
 
     scenes = SceneDataset(smoke_pipeline.artifact("generate"), "train")
-    return [(sc.depth_m, sc.mask, sc.boxes, sc.intrinsics)
-            for sc in (scenes[i] for i in range(len(scenes)))]
+    return [
+        (sc.depth_m, sc.mask, sc.boxes, sc.intrinsics)
+        for sc in (scenes[i] for i in range(len(scenes)))
+    ]
 
 
 def test_simulated_heaps_match_truth(smoke_scenes):
@@ -298,8 +325,14 @@ def test_deterministic(smoke_scenes):
     for s, t in zip(a, b):
         for name in ("center_cam", "normal_cam", "long_axis_cam", "short_axis_cam", "center_px"):
             assert np.array_equal(getattr(s, name), getattr(t, name))
-        assert (s.instance, s.long_length, s.short_length, s.num_points, s.area, s.extra) == \
-            (t.instance, t.long_length, t.short_length, t.num_points, t.area, t.extra)
+        assert (s.instance, s.long_length, s.short_length, s.num_points, s.area, s.extra) == (
+            t.instance,
+            t.long_length,
+            t.short_length,
+            t.num_points,
+            t.area,
+            t.extra,
+        )
     # Another seed picks other hypotheses but lands on the same planes: one each, on the same
     # box, normals within 0.1°, centres within 1 mm. Which of two equal-sized faces of a box is
     # found first, and the few points lying at the inlier threshold, depend on the hypothesis
@@ -310,9 +343,13 @@ def test_deterministic(smoke_scenes):
     assert len(c) == len(a) and [s.instance for s in c] == [s.instance for s in a]
     unmatched = set(range(len(c)))
     for s in a:
-        same = [k for k in unmatched if c[k].instance == s.instance
-                and abs(float(s.normal_cam @ c[k].normal_cam)) > np.cos(np.radians(0.1))
-                and np.linalg.norm(s.center_cam - c[k].center_cam) < 0.001]
+        same = [
+            k
+            for k in unmatched
+            if c[k].instance == s.instance
+            and abs(float(s.normal_cam @ c[k].normal_cam)) > np.cos(np.radians(0.1))
+            and np.linalg.norm(s.center_cam - c[k].center_cam) < 0.001
+        ]
         assert len(same) == 1, (s.instance, s.num_points)
         assert abs(c[same[0]].num_points - s.num_points) <= 0.03 * s.num_points
         unmatched.remove(same[0])

@@ -23,7 +23,8 @@ from pipeline.tracking import (
     rrd_timelines,
     topic_for,
 )
-from pipeline.tracking.stage_log import _quat_xyzw_from_matrix, rerun_executable
+from pipeline.tracking.readback import rerun_executable
+from pipeline.tracking.stage_log import quat_xyzw_from_matrix
 
 H, W = 6, 8
 N_SCENES = 3
@@ -55,14 +56,18 @@ def scene_depth(i: int, bump: float = 0.0) -> np.ndarray:
 
 
 def write_log(folder: Path, bump: float = 0.0) -> None:
-    """Three scenes: camera, depth, mask, 2 boxes (0 in EMPTY_SCENE), scalar, text; plus a static bin."""
+    """Three scenes: camera, depth, mask, 2 boxes (0 in EMPTY_SCENE), scalar, text; a static bin."""
     T = np.eye(4)
     T[:3, :3] = np.diag([1.0, -1.0, -1.0])  # looking straight down
     T[:3, 3] = [0.0, 0.0, 1.2]
     with StageLog(folder, "test_tracking", "rec-0001", blueprint=default_blueprint(CAM)) as log:
-        log.log_static_boxes(BIN, [[0.0, 0.0, 0.05]], [[0.6, 0.4, 0.1]], [[0, 0, 0, 1.0]], labels=["bin"])
+        log.log_static_boxes(
+            BIN, [[0.0, 0.0, 0.05]], [[0.6, 0.4, 0.1]], [[0, 0, 0, 1.0]], labels=["bin"]
+        )
         for i in range(N_SCENES):
-            log.set_time(sequences={"scene": i}, durations_s={"sim_time": 0.5 * i}, clock_ns=i * 10**9)
+            log.set_time(
+                sequences={"scene": i}, durations_s={"sim_time": 0.5 * i}, clock_ns=i * 10**9
+            )
             log.log_camera(CAM, INTR, T)
             log.log_depth(DEPTH, scene_depth(i, bump))
             mask = np.zeros((H, W), np.uint8)
@@ -92,8 +97,11 @@ def test_files_exist(logs):
     for folder in logs.values():
         assert (folder / "log.rrd").stat().st_size > 0
         assert (folder / "log.mcap").stat().st_size > 0
-    res = subprocess.run([rerun_executable(), "rrd", "verify", str(logs["a"] / "log.rrd")],
-                         capture_output=True, text=True)
+    res = subprocess.run(
+        [rerun_executable(), "rrd", "verify", str(logs["a"] / "log.rrd")],
+        capture_output=True,
+        text=True,
+    )
     assert res.returncode == 0, res.stdout + res.stderr
 
 
@@ -142,8 +150,9 @@ def test_mcap_check_cli(logs):
     probe = subprocess.run([exe, "mcap", "check", "--help"], capture_output=True, text=True)
     if probe.returncode != 0:
         pytest.skip("this rerun CLI has no `mcap check`")
-    res = subprocess.run([exe, "mcap", "check", str(logs["a"] / "log.mcap")],
-                         capture_output=True, text=True)
+    res = subprocess.run(
+        [exe, "mcap", "check", str(logs["a"] / "log.mcap")], capture_output=True, text=True
+    )
     assert res.returncode == 0, res.stdout + res.stderr
 
 
@@ -180,9 +189,13 @@ def test_mcap_boxes_camera_scalar_text(logs):
     path = logs["a"] / "log.mcap"
     boxes = _decoded(path, f"/{BOXES}")
     assert [len(u.entities) for _, _, u in boxes] == [1] * N_SCENES
-    assert [len(u.entities[0].cubes) for _, _, u in boxes] == [0 if i == EMPTY_SCENE else 2 for i in range(N_SCENES)]
+    assert [len(u.entities[0].cubes) for _, _, u in boxes] == [
+        0 if i == EMPTY_SCENE else 2 for i in range(N_SCENES)
+    ]
     cube = boxes[0][2].entities[0].cubes[1]
-    assert cube.size.x == pytest.approx(0.06) and cube.pose.orientation.w == pytest.approx(np.cos(0.3))
+    assert cube.size.x == pytest.approx(0.06) and cube.pose.orientation.w == pytest.approx(
+        np.cos(0.3)
+    )
     assert boxes[0][2].entities[0].id == BOXES and boxes[0][2].entities[0].frame_id == "world"
 
     (_, msg, calib), *_ = _decoded(path, f"/{CAM}/calibration")
@@ -192,7 +205,9 @@ def test_mcap_boxes_camera_scalar_text(logs):
     (_, _, tf), *_ = _decoded(path, "/tf")
     assert (tf.parent_frame_id, tf.child_frame_id) == ("world", "camera")
     assert tf.translation.z == pytest.approx(1.2)
-    assert (tf.rotation.x, tf.rotation.y, tf.rotation.z, tf.rotation.w) == pytest.approx((1, 0, 0, 0))
+    assert (tf.rotation.x, tf.rotation.y, tf.rotation.z, tf.rotation.w) == pytest.approx(
+        (1, 0, 0, 0)
+    )
 
     # JSON channel: mcap 1.6 has no JSON decoder, so read raw messages.
     import json
@@ -204,7 +219,9 @@ def test_mcap_boxes_camera_scalar_text(logs):
     assert raw[0][0].encoding == "jsonschema" and raw[0][1].message_encoding == "json"
 
     logs_ = _decoded(path, f"/{TEXT}")
-    assert [d.message for _, _, d in logs_] == [f"scene {i}: {0 if i == EMPTY_SCENE else 2} boxes" for i in range(N_SCENES)]
+    assert [d.message for _, _, d in logs_] == [
+        f"scene {i}: {0 if i == EMPTY_SCENE else 2} boxes" for i in range(N_SCENES)
+    ]
 
 
 def test_points_and_several_open_logs(tmp_path):
@@ -219,10 +236,14 @@ def test_points_and_several_open_logs(tmp_path):
         lp.close()  # idempotent with the context manager's close
     assert mcap_message_counts(tmp_path / "p" / "log.mcap") == {"/world/points": 1}
     assert mcap_message_counts(tmp_path / "q" / "log.mcap") == {"/world/points": 1, "/metrics/x": 1}
-    (_, msg, cloud), = _decoded(tmp_path / "p" / "log.mcap", "/world/points")
-    assert msg.log_time == 5 and cloud.point_stride == 12 and [f.name for f in cloud.fields] == ["x", "y", "z"]
+    ((_, msg, cloud),) = _decoded(tmp_path / "p" / "log.mcap", "/world/points")
+    assert (
+        msg.log_time == 5
+        and cloud.point_stride == 12
+        and [f.name for f in cloud.fields] == ["x", "y", "z"]
+    )
     np.testing.assert_array_equal(np.frombuffer(cloud.data, "<f4").reshape(-1, 3), pts)
-    (_, _, cloud), = _decoded(tmp_path / "q" / "log.mcap", "/world/points")
+    ((_, _, cloud),) = _decoded(tmp_path / "q" / "log.mcap", "/world/points")
     assert cloud.point_stride == 16 and len(cloud.fields) == 7
     assert "/world/points" in rrd_entity_paths(tmp_path / "q" / "log.rrd")
 
@@ -232,5 +253,5 @@ def test_helpers():
     assert topic_for("/a/b") == "/a/b"
     assert isinstance(default_blueprint(), rrb.Blueprint)
     R = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # 90 deg about z
-    assert _quat_xyzw_from_matrix(R) == pytest.approx((0, 0, np.sqrt(0.5), np.sqrt(0.5)))
-    assert _quat_xyzw_from_matrix(np.diag([1.0, -1.0, -1.0])) == pytest.approx((1, 0, 0, 0))
+    assert quat_xyzw_from_matrix(R) == pytest.approx((0, 0, np.sqrt(0.5), np.sqrt(0.5)))
+    assert quat_xyzw_from_matrix(np.diag([1.0, -1.0, -1.0])) == pytest.approx((1, 0, 0, 0))

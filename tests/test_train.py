@@ -7,19 +7,20 @@ import shutil
 import numpy as np
 import pytest
 import torch
+from conftest import conf_section, smoke_overrides
 
 from pipeline.artifacts import load_manifest, verify_artifact
 from pipeline.artifacts.fingerprint import sha256_file
 from pipeline.camera.geometry import Intrinsics
-from conftest import conf_section, smoke_overrides
-from pipeline.cli import compose
-from pipeline.labelling.hand import hand_label
-from pipeline.labelling.types import GraspClass, Surface
+from pipeline.config.physical import HandConfig
+from pipeline.grasping.hand import hand_label
+from pipeline.grasping.types import GraspClass, Surface
 from pipeline.planner.augment import flip_image, flip_rows
 from pipeline.planner.evaluate import ImagePredictions, match_image, precision_table
 from pipeline.planner.planner import Planner
+from pipeline.runtime.cli import compose
+from pipeline.stages.train import RESUME_PREFIX, train
 from pipeline.tracking import rrd_entity_paths, rrd_timelines
-from pipeline.train import RESUME_PREFIX, train
 
 R, L, B, NG = (int(c) for c in GraspClass)
 
@@ -58,8 +59,12 @@ def test_train_end_to_end_and_deterministic(labelled_root):
     assert blob["network"]["width"] == 0.0625
     ckpt = torch.load(folder / "checkpoint.pt", weights_only=True)
     assert ckpt["epoch"] == 1 and "optimizer" in ckpt
-    assert {"/train/step/loss", "/train/epoch/loss", "/samples/camera/depth",
-            "/samples/camera/predicted"} <= rrd_entity_paths(folder / "log.rrd")
+    assert {
+        "/train/step/loss",
+        "/train/epoch/loss",
+        "/samples/camera/depth",
+        "/samples/camera/predicted",
+    } <= rrd_entity_paths(folder / "log.rrd")
     assert {"step", "epoch"} <= rrd_timelines(folder / "log.rrd")
 
     # Same config, fresh models folder (no resume checkpoint): byte-identical weights.
@@ -78,8 +83,10 @@ def test_resume_matches_uninterrupted(labelled_root):
     fresh = train(_cfg("train", fresh_root, "train.epochs=2"))
     assert resumed.name == fresh.name
     assert sha256_file(resumed / "model.pt") == sha256_file(fresh / "model.pt")
-    assert (load_manifest(resumed)["metrics"]["train_loss_per_epoch"]
-            == load_manifest(fresh)["metrics"]["train_loss_per_epoch"])
+    assert (
+        load_manifest(resumed)["metrics"]["train_loss_per_epoch"]
+        == load_manifest(fresh)["metrics"]["train_loss_per_epoch"]
+    )
     assert load_manifest(resumed)["timings"]["epochs_run_here"] == 1
 
 
@@ -94,21 +101,22 @@ def test_a_bad_schedule_is_refused_before_any_folder(labelled_root):
 
 
 def test_onecycle_resumes_on_the_same_curve(labelled_root, monkeypatch):
-    fresh = train(_cfg("train", _fresh_models(labelled_root, "oc-fresh"), "train.epochs=2",
-                       *ONECYCLE))
+    fresh = train(
+        _cfg("train", _fresh_models(labelled_root, "oc-fresh"), "train.epochs=2", *ONECYCLE)
+    )
     # A run killed after its first epoch (the checkpoint of epoch 1 written) ...
     root = _fresh_models(labelled_root, "oc-killed")
-    real = __import__("pipeline.train", fromlist=["should_stop"]).should_stop
+    real = __import__("pipeline.planner.fit", fromlist=["should_stop"]).should_stop
 
     def crash_after_one(val_loss, patience):
         if len(val_loss) == 1:
             raise KeyboardInterrupt
         return real(val_loss, patience)
 
-    monkeypatch.setattr("pipeline.train.should_stop", crash_after_one)
+    monkeypatch.setattr("pipeline.planner.fit.should_stop", crash_after_one)
     with pytest.raises(KeyboardInterrupt):
         train(_cfg("train", root, "train.epochs=2", *ONECYCLE))
-    monkeypatch.setattr("pipeline.train.should_stop", real)
+    monkeypatch.setattr("pipeline.planner.fit.should_stop", real)
     # ... continues on the same learning-rate curve and writes the same weights
     resumed = train(_cfg("train", root, "train.epochs=2", *ONECYCLE))
     assert load_manifest(resumed)["timings"]["epochs_run_here"] == 1
@@ -141,8 +149,11 @@ def test_planner_load_and_plan(labelled_root):
 
     folder = train(_cfg("train", labelled_root))  # reuses the artifact
     planner = Planner.load(folder)
-    gen = sorted(p for p in (labelled_root / "data" / "generate").iterdir()
-                 if not p.name.startswith((".", "latest")))[0]
+    gen = sorted(
+        p
+        for p in (labelled_root / "data" / "generate").iterdir()
+        if not p.name.startswith((".", "latest"))
+    )[0]
     scene = SceneDataset(gen, "test")[0]
     planner.ranking.threshold = 0.0  # an untrained smoke net is never confident
     cands = planner.plan(scene.depth_m, scene.intrinsics)
@@ -170,18 +181,29 @@ def _face(tilt_deg: float, mirror=(1.0, 1.0, 1.0)) -> Surface:
     n = np.array([0.0, -np.sin(t), -np.cos(t)]) * m
     long = np.array([1.0, 0.0, 0.0]) * m
     c = np.array([0.02, 0.01, 0.5]) * m
-    return Surface(instance=1, center_cam=c, normal_cam=n, long_axis_cam=long,
-                   short_axis_cam=np.cross(n, long), long_length=0.06, short_length=0.03,
-                   center_px=np.array([224.0, 216.0]), num_points=500, area=0.0018)
+    return Surface(
+        instance=1,
+        center_cam=c,
+        normal_cam=n,
+        long_axis_cam=long,
+        short_axis_cam=np.cross(n, long),
+        long_length=0.06,
+        short_length=0.03,
+        center_px=np.array([224.0, 216.0]),
+        num_points=500,
+        area=0.0018,
+    )
 
 
 def _rows(surface: Surface, hand: HandConfig) -> dict:
     h = hand_label(surface, hand)
-    return {"uv": surface.center_px[None].astype(np.float32),
-            "center_cam": surface.center_cam[None].astype(np.float32),
-            "normal_cam": surface.normal_cam[None].astype(np.float32),
-            "x_axis_cam": h.x_axis_cam[None].astype(np.float32),
-            "grasp_class": np.array([int(h.grasp_class)], np.int8)}
+    return {
+        "uv": surface.center_px[None].astype(np.float32),
+        "center_cam": surface.center_cam[None].astype(np.float32),
+        "normal_cam": surface.normal_cam[None].astype(np.float32),
+        "x_axis_cam": h.x_axis_cam[None].astype(np.float32),
+        "grasp_class": np.array([int(h.grasp_class)], np.int8),
+    }
 
 
 def test_flip_labels_hand_cases():
@@ -215,6 +237,7 @@ def test_flip_labels_hand_cases():
 
 # ----------------------------------------------------------------------------- Table 1
 
+
 def test_precision_hand_made():
     # Image A: gt L at (100, 100), R at (300, 300).
     #   p1 L (105, 100) 0.9  → correct (5 px from the L)
@@ -223,12 +246,20 @@ def test_precision_hand_made():
     #   p4 NG (300, 300) 0.95 → not a prediction
     # Image B: gt B at (50, 50).
     #   p5 B (60, 50) 0.6    → correct
-    a = ImagePredictions(uv=np.array([[105, 100], [102, 100], [300, 320], [300, 300]]),
-                         classes=np.array([L, L, R, NG]), scores=np.array([0.9, 0.8, 0.7, 0.95]),
-                         gt_uv=np.array([[100, 100], [300, 300]]), gt_classes=np.array([L, R]))
-    b = ImagePredictions(uv=np.array([[60, 50]]), classes=np.array([B]),
-                         scores=np.array([0.6]), gt_uv=np.array([[50, 50]]),
-                         gt_classes=np.array([B]))
+    a = ImagePredictions(
+        uv=np.array([[105, 100], [102, 100], [300, 320], [300, 300]]),
+        classes=np.array([L, L, R, NG]),
+        scores=np.array([0.9, 0.8, 0.7, 0.95]),
+        gt_uv=np.array([[100, 100], [300, 300]]),
+        gt_classes=np.array([L, R]),
+    )
+    b = ImagePredictions(
+        uv=np.array([[60, 50]]),
+        classes=np.array([B]),
+        scores=np.array([0.6]),
+        gt_uv=np.array([[50, 50]]),
+        gt_classes=np.array([B]),
+    )
     assert match_image(a, 16.0).tolist() == [True, False, False, False]
     t = precision_table([a, b], 16.0)
     # Pooled ranking (4 predictions): 0.9 ✓, 0.8 ✗, 0.7 ✗, 0.6 ✓.
@@ -239,7 +270,11 @@ def test_precision_hand_made():
     assert np.allclose(t["pr_curve"]["precision"], [1, 1 / 2, 1 / 3, 2 / 4])
     assert np.allclose(t["pr_curve"]["recall"], [1 / 3, 1 / 3, 1 / 3, 2 / 3])
     # A wrong class at the right place is wrong.
-    c = ImagePredictions(uv=np.array([[100, 100]]), classes=np.array([R]),
-                         scores=np.array([0.9]), gt_uv=np.array([[100, 100]]),
-                         gt_classes=np.array([L]))
+    c = ImagePredictions(
+        uv=np.array([[100, 100]]),
+        classes=np.array([R]),
+        scores=np.array([0.9]),
+        gt_uv=np.array([[100, 100]]),
+        gt_classes=np.array([L]),
+    )
     assert precision_table([c], 16.0)["top1"] == 0.0

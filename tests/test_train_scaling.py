@@ -9,22 +9,26 @@ import sys
 import numpy as np
 import pytest
 import torch
-
 from conftest import smoke_overrides
+
 from pipeline.artifacts import load_manifest
-from pipeline.cli import compose
-from pipeline.dataset.scenes import SceneDataset
 from pipeline.dataset.labels import LabelSet
-from pipeline.planner.data import DepthShards, GraspDataset, make_loader
-from pipeline.planner.normalisation import Normalisation
+from pipeline.dataset.scenes import SceneDataset
+from pipeline.planner.data import DepthShards, GraspDataset, epoch_batches, make_loader
 from pipeline.planner.distributed import DistContext, split_batch
-from pipeline.planner.data import epoch_batches
-from pipeline.train import train
+from pipeline.planner.normalisation import Normalisation
+from pipeline.runtime.cli import compose
+from pipeline.stages.train import train
 
 # 12 training heaps in shards of 5 (shard boundaries inside the epoch), labels without the
 # robot-level checks (the labels' classes do not matter here).
-SMALL = ("generate.num_scenes=12", "generate.num_val_scenes=2", "generate.num_test_scenes=2",
-         "generate.scenes_per_shard=5", "label.robot_checks=false")
+SMALL = (
+    "generate.num_scenes=12",
+    "generate.num_val_scenes=2",
+    "generate.num_test_scenes=2",
+    "generate.scenes_per_shard=5",
+    "label.robot_checks=false",
+)
 
 
 @pytest.fixture(scope="module")
@@ -58,8 +62,10 @@ def test_every_image_seen_once_per_epoch_whatever_the_ranks():
     one, w1 = epoch_batches(n, batch, seed, 2, "uv", DistContext())
     assert w1 == [1.0] * len(one)
     for world in (2, 3):
-        parts = [epoch_batches(n, batch, seed, 2, "uv", DistContext(r, world, r, world))[0]
-                 for r in range(world)]
+        parts = [
+            epoch_batches(n, batch, seed, 2, "uv", DistContext(r, world, r, world))[0]
+            for r in range(world)
+        ]
         for step, full in enumerate(one):
             seen = [item for r in range(world) for item in parts[r][step]]
             if len(full) >= world:  # no padding: exactly the one-process batch, in order
@@ -92,8 +98,15 @@ def test_depth_streams_from_an_uncompressed_cache(labelled_root, tmp_path):
 def test_loader_workers_do_not_change_the_batches(labelled_root, tmp_path):
     gen_dir = labelled_root / "data" / "generate" / "latest"
     labels = LabelSet(labelled_root / "data" / "label" / "latest", "train")
-    data = GraspDataset(gen_dir, labels, "train", Normalisation(0.645, 0.1, 0.5), 13,
-                        compose("train", ["experiment=smoke"]).hand, cache_dir=tmp_path)
+    data = GraspDataset(
+        gen_dir,
+        labels,
+        "train",
+        Normalisation(0.645, 0.1, 0.5),
+        13,
+        compose("train", ["experiment=smoke"]).hand,
+        cache_dir=tmp_path,
+    )
     batches = [[(3, "uv"), (0, "none")], [(11, "u"), (7, "v"), (5, "none")]]
     in_process = list(make_loader(data, batches, workers=0))
     with_workers = list(make_loader(data, batches, workers=2))
@@ -112,28 +125,43 @@ def test_torchrun_two_processes_match_one(labelled, tmp_path):
     the first step's loss, 2.8 % in the second epoch's training loss and 0.12 % in the validation
     loss; asserted: 2 %, 6 % and 1 %."""
     labelled_root = labelled.copy(tmp_path / "root").root  # the two trainings write into it
-    overrides = smoke_overrides(labelled_root, *SMALL, "train.epochs=2", "train.batch_size=8",
-                                "train.log_samples=0")
+    overrides = smoke_overrides(
+        labelled_root, *SMALL, "train.epochs=2", "train.batch_size=8", "train.log_samples=0"
+    )
     single = load_manifest(train(compose("train", overrides)))
     env = {**os.environ, "PYTHONPATH": os.getcwd()}
-    torchrun = [sys.executable, "-m", "torch.distributed.run", "--standalone",
-                "--nproc_per_node=2", "-m", "pipeline.train", *overrides]
+    torchrun = [
+        sys.executable,
+        "-m",
+        "torch.distributed.run",
+        "--standalone",
+        "--nproc_per_node=2",
+        "-m",
+        "pipeline.stages.train",
+        *overrides,
+    ]
     out = subprocess.run(torchrun, capture_output=True, text=True, env=env, timeout=600)
     assert out.returncode == 0, out.stderr[-3000:]
     two_dir = labelled_root / "models" / "train" / "latest"
     two = load_manifest(two_dir)
-    assert two["config"]["train"]["world_size"] == 2 and "world_size" not in single["config"]["train"]
+    assert (
+        two["config"]["train"]["world_size"] == 2 and "world_size" not in single["config"]["train"]
+    )
     assert two["version"] != single["version"]
     assert two["timings"]["processes"] == 2
     assert two["metrics"]["images"] == single["metrics"]["images"]
     ckpt = torch.load(two_dir / "checkpoint.pt", weights_only=True)
-    ckpt1 = torch.load(labelled_root / "models" / "train" / single["version"] / "checkpoint.pt",
-                       weights_only=True)
+    ckpt1 = torch.load(
+        labelled_root / "models" / "train" / single["version"] / "checkpoint.pt", weights_only=True
+    )
     assert len(ckpt["history"]["step_total"]) == len(ckpt1["history"]["step_total"]) == 4
-    np.testing.assert_allclose(two["metrics"]["train_loss_per_epoch"],
-                               single["metrics"]["train_loss_per_epoch"], rtol=0.06)
-    np.testing.assert_allclose(two["metrics"]["val_loss_per_epoch"],
-                               single["metrics"]["val_loss_per_epoch"], rtol=0.01)
+    np.testing.assert_allclose(
+        two["metrics"]["train_loss_per_epoch"], single["metrics"]["train_loss_per_epoch"], rtol=0.06
+    )
+    np.testing.assert_allclose(
+        two["metrics"]["val_loss_per_epoch"], single["metrics"]["val_loss_per_epoch"], rtol=0.01
+    )
     # the first step sees the same initial weights and the same 8 images: nearly equal losses
-    assert ckpt["history"]["step_total"][0] == pytest.approx(ckpt1["history"]["step_total"][0],
-                                                             rel=0.02)
+    assert ckpt["history"]["step_total"][0] == pytest.approx(
+        ckpt1["history"]["step_total"][0], rel=0.02
+    )

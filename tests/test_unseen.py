@@ -1,4 +1,4 @@
-"""The unseen-size test set (pipeline/unseen.py): no training size among its boxes, bad input
+"""The unseen-size test set (pipeline/stages/unseen.py): no training size among its boxes, bad input
 refused before any work, and a smoke run end to end (seen rows from the manifests, unseen rows
 measured, ``latest`` left where it was, the report's section)."""
 
@@ -8,13 +8,21 @@ import json
 
 import pytest
 
-from pipeline.cli import compose
+from pipeline.runtime.cli import compose
 
 
 def _base(tmp_path):
-    return ["experiment=smoke", f"paths.root={tmp_path}", "logging.progress=false",
-            "generate.num_scenes=4", "generate.num_val_scenes=2", "generate.num_test_scenes=2",
-            "generate.scenes_per_shard=4", "label.robot_checks=false", "baseline.epochs=1"]
+    return [
+        "experiment=smoke",
+        f"paths.root={tmp_path}",
+        "logging.progress=false",
+        "generate.num_scenes=4",
+        "generate.num_val_scenes=2",
+        "generate.num_test_scenes=2",
+        "generate.scenes_per_shard=4",
+        "label.robot_checks=false",
+        "baseline.epochs=1",
+    ]
 
 
 def test_unseen_boxes_are_none_of_the_training_sizes():
@@ -28,7 +36,7 @@ def test_unseen_boxes_are_none_of_the_training_sizes():
 
 
 def test_bad_input_is_refused_before_any_work(tmp_path):
-    from pipeline.unseen import unseen
+    from pipeline.stages.unseen import unseen
 
     with pytest.raises(ValueError, match="conf/boxes"):
         unseen(compose("unseen", _base(tmp_path) + ["unseen.boxes=nowhere"]))
@@ -52,12 +60,13 @@ def test_closed_loop_boxes_are_the_unseen_sizes():
 @pytest.mark.slow
 def test_smoke_unseen_end_to_end(smoke_pipeline, tmp_path):
     from conftest import smoke_overrides
+
     from pipeline.artifacts import ArtifactError, load_manifest
-    from pipeline.baseline import baseline
-    from pipeline.evaluate import evaluate
     from pipeline.report import report
     from pipeline.report.unseen import UNSEEN_SECTION
-    from pipeline.unseen import unseen
+    from pipeline.stages.baseline import baseline
+    from pipeline.stages.evaluate import evaluate
+    from pipeline.stages.unseen import unseen
 
     # the session's generate -> label -> train; nothing trained yet in an empty root
     with pytest.raises(ArtifactError, match="unseen.train_version"):
@@ -85,16 +94,21 @@ def test_smoke_unseen_end_to_end(smoke_pipeline, tmp_path):
     # Table 1: the seen row is the train manifest's, the unseen row is measured at the same th
     t1 = {r["set"]: r for r in data["table1"]}
     train_t1 = load_manifest(root / "models" / "train" / up["train"])["metrics"]["table1"]
-    assert t1["seen"]["top1"] == (None if train_t1["top1"] is None
-                                  else round(train_t1["top1"], 6))
+    assert t1["seen"]["top1"] == (None if train_t1["top1"] is None else round(train_t1["top1"], 6))
     assert t1["unseen"]["threshold"] == train_t1["threshold"]
     assert t1["unseen"]["scored_images"] <= 2
     # Table 2: every planner on both sets
     sets = {(r["set"], r["planner"]) for r in data["table2"]}
     assert {p for s, p in sets if s == "seen"} == {p for s, p in sets if s == "unseen"}
     assert all(r["images"] <= 2 for r in data["table2"] if r["set"] == "unseen")
-    for name in ("table1.csv", "table2.csv", "closed_loop.csv", "drops_by_mass.csv", "log.rrd",
-                 "log.mcap"):
+    for name in (
+        "table1.csv",
+        "table2.csv",
+        "closed_loop.csv",
+        "drops_by_mass.csv",
+        "log.rrd",
+        "log.mcap",
+    ):
         assert (out / name).is_file()
     # the closed loop: every planner on heaps of the unseen boxes, drawn from the test stream
     ev = load_manifest(root / "data" / "evaluate" / up["evaluate_unseen"])
@@ -102,8 +116,9 @@ def test_smoke_unseen_end_to_end(smoke_pipeline, tmp_path):
     assert ev["config"]["evaluate"]["split"] == "test"
     assert [r["planner"] for r in data["closed_loop"]] == ev["config"]["evaluate"]["planners"]
     keys = ("planner", "boxes", "picked", "attempts", "successes", "end_no_grasp")
-    assert [{k: r[k] for k in keys} for r in data["closed_loop"]] == \
-        [{k: r[k] for k in keys} for r in ev["metrics"]["table3"]]
+    assert [{k: r[k] for k in keys} for r in data["closed_loop"]] == [
+        {k: r[k] for k in keys} for r in ev["metrics"]["table3"]
+    ]
     assert up["evaluate_unseen"] != table3  # other heaps: another evaluation
     assert (root / "data" / "evaluate" / "latest").resolve().name == table3
     assert unseen(cfg, base) == out  # reused

@@ -21,12 +21,14 @@ from dataclasses import replace
 import numpy as np
 import pybullet as p
 import pytest
-
 from conftest import default_config
+
 from pipeline.camera.geometry import Intrinsics
-from pipeline.dexnet.contact import REASONS, SuctionModelConfig, evaluate_contacts
-from pipeline.world.suction import SuctionGripper, hold_test, seal_test
-from pipeline.robot import CUP_OFFSET, Robot, RobotConfig
+from pipeline.dexnet.contact import REASONS, evaluate_contacts
+from pipeline.grasping.suction import SuctionModelConfig, hold_test
+from pipeline.robot.model import Robot, RobotConfig
+from pipeline.robot.urdf_builder import CUP_OFFSET
+from pipeline.world.suction import SuctionGripper, seal_test
 
 CFG = default_config(SuctionModelConfig)
 SIZE = np.array([0.092, 0.145, 0.052])  # world x, y, z edge lengths, m
@@ -59,19 +61,30 @@ class Scene:
         self.mid = (self.left + self.right) / 2
         self.bodies: list[int] = []
 
-    def box(self, dx=0.0, dy=0.0, density=400.0, size=SIZE, centre=None, gap=GAP,
-            tilt_x_deg=0.0, mass=None):
+    def box(
+        self,
+        dx=0.0,
+        dy=0.0,
+        density=400.0,
+        size=SIZE,
+        centre=None,
+        gap=GAP,
+        tilt_x_deg=0.0,
+        mass=None,
+    ):
         """A box under the cups' midpoint shifted by (dx, dy), its top ``gap`` below the lips;
         returns (body, mass)."""
         size = np.asarray(size, dtype=float)
         if centre is None:
             centre = self.mid + [dx, dy, -gap - size[2] / 2]
         mass = density * float(np.prod(size)) if mass is None else mass
-        col = p.createCollisionShape(p.GEOM_BOX, halfExtents=(size / 2).tolist(),
-                                     physicsClientId=self.client)
+        col = p.createCollisionShape(
+            p.GEOM_BOX, halfExtents=(size / 2).tolist(), physicsClientId=self.client
+        )
         orn = p.getQuaternionFromEuler([math.radians(tilt_x_deg), 0, 0])
-        body = p.createMultiBody(mass, col, basePosition=list(centre), baseOrientation=orn,
-                                 physicsClientId=self.client)
+        body = p.createMultiBody(
+            mass, col, basePosition=list(centre), baseOrientation=orn, physicsClientId=self.client
+        )
         p.changeDynamics(body, -1, lateralFriction=0.5, physicsClientId=self.client)
         self.bodies.append(body)
         return body, mass
@@ -94,9 +107,14 @@ def scene(world):
 
 def _hold_joints(robot, q) -> None:
     """Joint motors hold ``q`` (position control, 500 N m) while the simulation steps."""
-    p.setJointMotorControlArray(robot.body_id, robot.joint_indices, p.POSITION_CONTROL,
-                                targetPositions=list(q), forces=[500.0] * len(q),
-                                physicsClientId=robot.client)
+    p.setJointMotorControlArray(
+        robot.body_id,
+        robot.joint_indices,
+        p.POSITION_CONTROL,
+        targetPositions=list(q),
+        forces=[500.0] * len(q),
+        physicsClientId=robot.client,
+    )
 
 
 def test_home_cup_geometry(scene):
@@ -110,15 +128,22 @@ def test_both_cups_on_the_middle_of_a_large_face_seal_and_hold(scene):
     res = scene.seal("B", [box])
     assert res.sealed and res.reason == "ok" and res.body == box
     # Contact points straight under the lips on the top face (1 mm below them); axis world −z.
-    assert np.allclose(res.contact_points, [scene.left - [0, 0, GAP], scene.right - [0, 0, GAP]],
-                       atol=1e-4)
+    assert np.allclose(
+        res.contact_points, [scene.left - [0, 0, GAP], scene.right - [0, 0, GAP]], atol=1e-4
+    )
     assert np.allclose(res.axis, [0, 0, -1], atol=1e-6)
     assert np.allclose(res.heights, GAP, atol=1e-4)  # every rim point 1 mm ahead
     # Hold: W = 2.722 N, f_N = 2 V - W = 22.68 N; the COM is straight below the centroid, so no
     # shear, torsion or bending: margin = 2 V / W - 1 = 25.4 / 2.722 - 1 = 8.33.
-    hold = hold_test(mass, p.getBasePositionAndOrientation(box, physicsClientId=scene.client)[0],
-                     res.contact_points,
-                     res.axis, G, CFG, CUP_OFFSET)
+    hold = hold_test(
+        mass,
+        p.getBasePositionAndOrientation(box, physicsClientId=scene.client)[0],
+        res.contact_points,
+        res.axis,
+        G,
+        CFG,
+        CUP_OFFSET,
+    )
     assert hold.ok and hold.reason == "ok"
     assert hold.margin == pytest.approx(25.4 / (mass * 9.81) - 1, rel=1e-6)
     gripper = SuctionGripper(scene.client, scene.robot, CFG, CUP_OFFSET)
@@ -134,11 +159,15 @@ def test_rays_pass_through_the_cups_own_pad(scene):
     # of them at fraction 0. A plain closest-hit batch would therefore see the robot there.
     T = scene.robot.link_pose("cup_left")
     ang = 2 * np.pi * np.arange(CFG.ring_points) / CFG.ring_points
-    rim = (T[:3, 3] + CFG.cup_radius * (np.cos(ang)[:, None] * T[:3, 0]
-                                        + np.sin(ang)[:, None] * T[:3, 1]))
+    rim = T[:3, 3] + CFG.cup_radius * (
+        np.cos(ang)[:, None] * T[:3, 0] + np.sin(ang)[:, None] * T[:3, 1]
+    )
     box, _ = scene.box()
-    plain = p.rayTestBatch((rim - 0.01 * T[:3, 2]).tolist(), (rim + 0.02 * T[:3, 2]).tolist(),
-                           physicsClientId=scene.client)
+    plain = p.rayTestBatch(
+        (rim - 0.01 * T[:3, 2]).tolist(),
+        (rim + 0.02 * T[:3, 2]).tolist(),
+        physicsClientId=scene.client,
+    )
     assert any(r[0] == scene.robot.body_id for r in plain)
     res = scene.seal("L", [box])
     assert res.sealed and np.allclose(res.heights, GAP, atol=1e-4)
@@ -148,8 +177,7 @@ def test_ignored_body_is_passed_through(scene):
     # A 2 mm sheet lying on the box top, 6 mm narrower than the cup: the cup is off_face on it,
     # but with the sheet ignored the rays reach the box below and it seals (heights 3 mm).
     box, _ = scene.box(gap=0.003)
-    sheet, _ = scene.box(size=(0.012, 0.012, 0.002), centre=scene.left - [0, 0, 0.002],
-                         mass=0.0)
+    sheet, _ = scene.box(size=(0.012, 0.012, 0.002), centre=scene.left - [0, 0, 0.002], mass=0.0)
     assert scene.seal("L", [box]).reason == "off_face"
     res = scene.seal("L", [box], ignore=(sheet,))
     assert res.sealed and res.body == box and np.allclose(res.heights, 0.003, atol=1e-4)
@@ -160,8 +188,11 @@ def test_cup_over_an_edge_is_off_face(scene):
     # (y_edge = 0.035 + 0.003 = 0.038): the left rim (radius 9 mm) hangs 6 mm over the edge,
     # the right cup (y = −0.035) is 62 mm inside the −y edge at −0.107.
     box, _ = scene.box(dy=(scene.left[1] + 0.003 - SIZE[1] / 2) - scene.mid[1])
-    for pattern, sealed, reason in (("B", False, "off_face"), ("L", False, "off_face"),
-                                    ("R", True, "ok")):
+    for pattern, sealed, reason in (
+        ("B", False, "off_face"),
+        ("L", False, "off_face"),
+        ("R", True, "ok"),
+    ):
         res = scene.seal(pattern, [box])
         assert (res.sealed, res.reason) == (sealed, reason), pattern
 
@@ -194,8 +225,9 @@ def test_tilted_face_is_uneven_for_two_cups_only(scene):
     # Both cups' rims span 2 (0.035 + 0.009) = 88 mm: spread 7.7 mm > 3 mm (the rigid hand).
     box, _ = scene.box(tilt_x_deg=5.0, gap=0.005)
     res_l, res_b = scene.seal("L", [box]), scene.seal("B", [box])
-    assert res_l.sealed and np.ptp(res_l.heights) == pytest.approx(0.018 * math.tan(
-        math.radians(5)), abs=2e-4)
+    assert res_l.sealed and np.ptp(res_l.heights) == pytest.approx(
+        0.018 * math.tan(math.radians(5)), abs=2e-4
+    )
     assert not res_b.sealed and res_b.reason == "uneven"
     assert np.ptp(res_b.heights) == pytest.approx(0.088 * math.tan(math.radians(5)), abs=2e-4)
 
@@ -249,8 +281,9 @@ def test_two_cup_torsion_uses_the_friction_couple():
     pts = np.array([[0, 0.035, 0], [0, -0.035, 0]])
     res = hold_test(1.0, [0, 0.03, -0.001], pts, [0, 0, -1], g, CFG, 0.035)
     assert res.ok
-    assert res.margin == pytest.approx(min(25.4 / 9.81, 7.795 / 1.0, 0.2728 / 0.03,
-                                           15.59 / 6.69) - 1, rel=2e-3)
+    assert res.margin == pytest.approx(
+        min(25.4 / 9.81, 7.795 / 1.0, 0.2728 / 0.03, 15.59 / 6.69) - 1, rel=2e-3
+    )
     one = hold_test(1.0, [0, 0.03, -0.001], [[0, 0, 0]], [0, 0, -1], g, CFG, 0.035)
     assert not one.ok and one.reason == "torsion"
 
@@ -270,18 +303,22 @@ def _render_top(box_centre, size, top, floor, intr):
     u, v = np.meshgrid(np.arange(intr.width, dtype=float), np.arange(intr.height, dtype=float))
     x = (u - intr.cx) / intr.fx * top
     y = (v - intr.cy) / intr.fy * top
-    inside = ((np.abs(x - box_centre[0]) <= size[0] / 2)
-              & (np.abs(y - box_centre[1]) <= size[1] / 2))
-    return (np.where(inside, top, floor).astype(np.float32),
-            inside.astype(np.uint8))
+    inside = (np.abs(x - box_centre[0]) <= size[0] / 2) & (np.abs(y - box_centre[1]) <= size[1] / 2)
+    return (np.where(inside, top, floor).astype(np.float32), inside.astype(np.uint8))
 
 
-@pytest.mark.parametrize("density, gravity_dir, expected", [
-    (800.0, (0.0, 0.0, 1.0), ["ok", "ok", "bending", "bending", "bending", "ok", "bending",
-                              "bending"]),
-    (400.0, (0.9, 0.3, 0.3), ["ok", "ok", "ok", "ok", "torsion", "ok", "torsion", "ok"]),
-    (1600.0, (0.25, -0.2, 0.95), ["shear"] * 8),
-])
+@pytest.mark.parametrize(
+    "density, gravity_dir, expected",
+    [
+        (
+            800.0,
+            (0.0, 0.0, 1.0),
+            ["ok", "ok", "bending", "bending", "bending", "ok", "bending", "bending"],
+        ),
+        (400.0, (0.9, 0.3, 0.3), ["ok", "ok", "ok", "ok", "torsion", "ok", "torsion", "ok"]),
+        (1600.0, (0.25, -0.2, 0.95), ["shear"] * 8),
+    ],
+)
 def test_one_cup_reproduces_the_dexnet_contact_rule(density, gravity_dir, expected):
     # Camera frame, looking down at a 0.145 x 0.092 x 0.05 box with its top at z = 0.5; eight
     # contact points on the top face, all >= 7 mm inside its edges (contact.py's image checks
@@ -297,15 +334,26 @@ def test_one_cup_reproduces_the_dexnet_contact_rule(density, gravity_dir, expect
     centre = np.array([0.0, 0.0, top + size[2] / 2])
     intr = Intrinsics(60, 60, 75.0, 75.0, 29.5, 29.5)
     depth, mask = _render_top(centre, size, top, floor, intr)
-    pts = np.array([[0, 0], [0.01, 0], [0.02, 0], [0, 0.02], [-0.04, 0.015], [0.005, -0.008],
-                    [0, -0.03], [0.05, 0]])
+    pts = np.array(
+        [
+            [0, 0],
+            [0.01, 0],
+            [0.02, 0],
+            [0, 0.02],
+            [-0.04, 0.015],
+            [0.005, -0.008],
+            [0, -0.03],
+            [0.05, 0],
+        ]
+    )
     pts = np.column_stack([pts, np.full(len(pts), top)])
     axis = np.array([0.0, 0.0, 1.0])
     T = np.eye(4)
     T[:3, 3] = centre
     boxes = [type("B", (), {"size": size, "T_cam_box": T})()]
-    ref = evaluate_contacts(pts, np.tile(axis, (len(pts), 1)), depth, mask, intr, boxes,
-                            np.array(gravity_dir), cfg)
+    ref = evaluate_contacts(
+        pts, np.tile(axis, (len(pts), 1)), depth, mask, intr, boxes, np.array(gravity_dir), cfg
+    )
     assert ref.seal.all()
     g = cfg.gravity * np.asarray(gravity_dir) / np.linalg.norm(gravity_dir)
     mass = cfg.density * float(np.prod(size))
@@ -328,7 +376,9 @@ def test_attached_box_stays_and_falls_after_release(scene):
         gripper.try_grasp("B", {box: mass})
     for _ in range(120):
         p.stepSimulation(physicsClientId=scene.client)
-    assert p.getBasePositionAndOrientation(box, physicsClientId=scene.client)[0][2] == pytest.approx(z0, abs=1e-3)
+    assert p.getBasePositionAndOrientation(box, physicsClientId=scene.client)[0][
+        2
+    ] == pytest.approx(z0, abs=1e-3)
     # The box follows the hand: turn joint 1 by 0.05 rad (the lips swing 0.42 x 0.05 = 21 mm
     # sideways) and hold it there with the joint motors; the box keeps its pose in the cup frame.
     T_cup_box = np.linalg.inv(scene.robot.link_pose("cup_left")) @ _pose(box, scene.client)

@@ -33,8 +33,9 @@ class CentroidPlanner:
         # each pixel's height above the bin floor (world z), from the camera's pose
         rays = np.stack([(u - intr.cx) / intr.fx, (v - intr.cy) / intr.fy, np.ones_like(depth)])
         height = np.einsum("k,khw->hw", T[2, :3], rays * depth) + T[2, 3]
-        step = np.maximum(np.abs(np.diff(depth, axis=0, append=0)),
-                          np.abs(np.diff(depth, axis=1, append=0)))
+        step = np.maximum(
+            np.abs(np.diff(depth, axis=0, append=0)), np.abs(np.diff(depth, axis=1, append=0))
+        )
         smooth = (depth > 0) & (step < self.max_step_m) & (height > self.floor_m)
         count, labels, stats, _ = cv2.connectedComponentsWithStats(smooth.astype(np.uint8), 4)
         grasps = []
@@ -46,8 +47,7 @@ class CentroidPlanner:
             (_, _), (a, b), _ = cv2.minAreaRect(pts)
             metres_per_px = float(np.median(depth[vs, us])) / intr.fx
             short = min(a, b) * metres_per_px
-            pattern = "B" if short >= self.two_cups_m else "L" if short >= self.one_cup_m \
-                else None
+            pattern = "B" if short >= self.two_cups_m else "L" if short >= self.one_cup_m else None
             if pattern is None:
                 continue
             i = np.argmin((us - us.mean()) ** 2 + (vs - vs.mean()) ** 2)  # nearest the centroid

@@ -3,14 +3,15 @@
 from __future__ import annotations
 
 import csv
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 
 def write_rows(path: Path, rows: list[dict], empty_header: Sequence[str] = ("empty",)) -> None:
     """Write ``rows`` to ``path`` (Unix line ends); no rows: a header of ``empty_header``."""
     with open(path, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]) if rows else list(empty_header),
-                           lineterminator="\n")
+        w = csv.DictWriter(
+            f, fieldnames=list(rows[0]) if rows else list(empty_header), lineterminator="\n"
+        )
         w.writeheader()
         w.writerows(rows)

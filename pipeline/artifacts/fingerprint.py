@@ -6,7 +6,7 @@ import ast
 import hashlib
 import subprocess
 import sys
-from functools import lru_cache
+from functools import cache, lru_cache
 from importlib import metadata
 from pathlib import Path
 
@@ -42,7 +42,15 @@ def sha256_file(path: Path, chunk: int = 1 << 20) -> str:
 # Plumbing that cannot change a stage's numbers: the resolved config is hashed itself (so the
 # schema and the CLI need not be), the artifact code writes manifests, not results, and the
 # executor only decides where shards run (same artifact locally and on Ray: test_executor.py).
-PLUMBING = ("pipeline.cli", "pipeline.config", "pipeline.artifacts", "pipeline.executor")
+PLUMBING = ("pipeline.runtime", "pipeline.config", "pipeline.artifacts")
+
+
+def stage_module(stage: str) -> str:
+    """The module of a stage: ``pipeline.stages.<stage>``, or ``pipeline.<stage>`` for a stage
+    that is a package of its own (``report``)."""
+    if (PACKAGE_ROOT / "stages" / f"{stage}.py").is_file():
+        return f"pipeline.stages.{stage}"
+    return f"pipeline.{stage}"
 
 
 def _module_path(name: str) -> Path | None:
@@ -76,7 +84,7 @@ def _imports(path: Path, name: str) -> set[str]:
     return {m for m in found if m == "pipeline" or m.startswith("pipeline.")}
 
 
-@lru_cache(maxsize=None)
+@cache
 def import_closure(module: str) -> tuple[str, ...]:
     """Every ``pipeline`` module that ``module`` imports, transitively, itself included, and
     the packages (``__init__``) on the way; sorted. Found by parsing the source (``ast``), so
@@ -97,28 +105,36 @@ def import_closure(module: str) -> tuple[str, ...]:
     return tuple(sorted(seen))
 
 
-@lru_cache(maxsize=None)
+@cache
 def source_hash(stage: str | None = None) -> str:
     """sha256 over the source a stage's result depends on (relative path and bytes, sorted).
 
-    With ``stage``: the files of ``import_closure("pipeline.<stage>")`` except the
+    With ``stage``: the files of ``import_closure(stage_module(stage))`` except the
     :data:`PLUMBING` modules, plus the data files (non-Python, e.g. the robot's URDF) kept in
     the sub-folders of the packages in that closure. So editing the training code leaves the
     generation artifact's version alone. Without ``stage``, or for a stage with no module of its
     own: every ``pipeline/**/*.py`` file.
     """
-    if stage is None or _module_path(f"pipeline.{stage}") is None:
+    if stage is None or _module_path(stage_module(stage)) is None:
         files = [p for p in PACKAGE_ROOT.rglob("*.py") if "__pycache__" not in p.parts]
     else:
-        modules = [m for m in import_closure(f"pipeline.{stage}")
-                   if not any(m == p or m.startswith(p + ".") for p in PLUMBING)]
+        modules = [
+            m
+            for m in import_closure(stage_module(stage))
+            if not any(m == p or m.startswith(p + ".") for p in PLUMBING)
+        ]
         files = [_module_path(m) for m in modules]
         for m in modules:
             path = _module_path(m)
             if path.name == "__init__.py" and m != "pipeline":
-                files += [p for p in path.parent.rglob("*") if p.is_file()
-                          and p.suffix not in (".py", ".pyc") and "__pycache__" not in p.parts
-                          and p.parent != path.parent]
+                files += [
+                    p
+                    for p in path.parent.rglob("*")
+                    if p.is_file()
+                    and p.suffix not in (".py", ".pyc")
+                    and "__pycache__" not in p.parts
+                    and p.parent != path.parent
+                ]
     h = hashlib.sha256()
     for path in sorted(set(files)):
         h.update(path.relative_to(PACKAGE_ROOT).as_posix().encode())
@@ -158,8 +174,12 @@ def platform_info() -> dict[str, str]:
     except OSError:
         pass
     libc = " ".join(platform.libc_ver()).strip()
-    return {"machine": platform.machine(), "cpu": cpu or platform.processor(),
-            "system": f"{platform.system()} {platform.release()}", "libc": libc}
+    return {
+        "machine": platform.machine(),
+        "cpu": cpu or platform.processor(),
+        "system": f"{platform.system()} {platform.release()}",
+        "libc": libc,
+    }
 
 
 @lru_cache(maxsize=1)
@@ -170,7 +190,10 @@ def git_state() -> dict[str, object]:
         try:
             out = subprocess.run(
                 ["git", "-C", str(REPO_ROOT), *args],
-                capture_output=True, text=True, timeout=10, check=True,
+                capture_output=True,
+                text=True,
+                timeout=10,
+                check=True,
             )
         except (OSError, subprocess.SubprocessError):
             return None

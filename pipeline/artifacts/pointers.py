@@ -8,9 +8,9 @@ puts the pointers back afterwards: ``latest`` keeps naming the ``make reproduce`
 from __future__ import annotations
 
 import os
+from collections.abc import Iterable
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterable
 
 from pipeline.artifacts.store import LATEST, point_latest
 

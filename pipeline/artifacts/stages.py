@@ -1,4 +1,4 @@
-"""Running a pipeline stage by name from another stage (the study stages: robustness, unseen).
+"""The artifacts a study stage (robustness, unseen) compares: the trained network and its baseline.
 
 A study stage reads the trained network and the baseline artifact that compared it
 (``compared_pair``: ``latest`` by default, as ``make reproduce`` leaves them) and runs the
@@ -9,12 +9,12 @@ what differs, and a study rerun after a code change does not retrain the network
 
 from __future__ import annotations
 
-import importlib
 from pathlib import Path
 
 
-def compared_pair(data: Path, models: Path, train_version: str, baseline_version: str,
-                  prefix: str) -> dict[str, Path]:
+def compared_pair(
+    data: Path, models: Path, train_version: str, baseline_version: str, prefix: str
+) -> dict[str, Path]:
     """``{"train": models/train/<v>, "baseline": data/baseline/<v>}``, both verified.
 
     ``prefix``: the study's config section, named in the errors (``<prefix>.train_version``).
@@ -22,31 +22,20 @@ def compared_pair(data: Path, models: Path, train_version: str, baseline_version
     compared another network (its Table 2 would not be this network's)."""
     from pipeline.artifacts.store import load_manifest, resolve_artifact
 
-    dirs = {"train": resolve_artifact(models, "train", str(train_version), verify=True,
-                                      key=f"{prefix}.train_version"),
-            "baseline": resolve_artifact(data, "baseline", str(baseline_version), verify=True,
-                                         key=f"{prefix}.baseline_version")}
+    dirs = {
+        "train": resolve_artifact(
+            models, "train", str(train_version), verify=True, key=f"{prefix}.train_version"
+        ),
+        "baseline": resolve_artifact(
+            data, "baseline", str(baseline_version), verify=True, key=f"{prefix}.baseline_version"
+        ),
+    }
     compared = (load_manifest(dirs["baseline"]).get("upstream") or {}).get("train")
     if compared != dirs["train"].name:
         raise ValueError(
             f"baseline artifact {dirs['baseline'].name} compared train artifact {compared}, not "
             f"{dirs['train'].name}: its Dex-Net-style rows would not sit beside this network's. "
             f"Rerun `make baseline` (baseline.train_version={dirs['train'].name}), or pass "
-            f"matching {prefix}.train_version and {prefix}.baseline_version")
+            f"matching {prefix}.train_version and {prefix}.baseline_version"
+        )
     return dirs
-
-
-def run_named_stage(stage: str, overrides: list[str], caller: str) -> Path:
-    """Run (or reuse) ``pipeline.<stage>`` with these Hydra overrides; its artifact folder.
-
-    ``caller``: the study's name, printed with the command. Raises ``RuntimeError`` when the
-    stage returns no folder (a non-zero torchrun rank)."""
-    from pipeline.cli import compose
-
-    fn = getattr(importlib.import_module(f"pipeline.{stage}"), stage)
-    print(f"[{caller}] {stage} {' '.join(overrides)}", flush=True)
-    out = fn(compose(stage, list(overrides)))
-    if out is None:
-        raise RuntimeError(f"[{caller}] the {stage} stage returned no artifact (a non-zero "
-                           "torchrun rank?)")
-    return Path(out)

@@ -40,7 +40,8 @@ Write protocol (``ArtifactWriter``, used through ``run_stage``):
    locked the removed file notices and starts over on a new one).
 
 A crash, ``kill -9`` or exception at any point leaves at most ``.tmp-*`` folders and a lock
-file (until the next run of that version), never read by any reader: ``resolve_artifact`` accepts only ``<stage_dir>/<version>/``
+file (until the next run of that version), never read by any reader: ``resolve_artifact`` accepts
+only ``<stage_dir>/<version>/``
 holding ``manifest.json``, version names cannot start with ``.``, and ``latest`` is re-pointed
 only after the rename. A folder without ``manifest.json`` is not an artifact. Cleanup when a run
 starts: random-named ``.tmp-*`` entries (moved-aside old versions, ``latest`` symlinks, work
@@ -52,37 +53,32 @@ is kept for a rerun of that version unless nobody holds its lock and it is older
 from __future__ import annotations
 
 import datetime as _dt
-import errno
-import fcntl
 import json
 import os
-import re
 import shutil
-import sys
 import time
 import uuid
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable, Mapping, Sequence, TypeVar
+from typing import Any, TypeVar
 
-from pipeline.artifacts.fingerprint import (git_state, package_versions, platform_info, sha256_file,
-                                            source_hash)
+from pipeline.artifacts.errors import ArtifactError
+from pipeline.artifacts.fingerprint import (
+    git_state,
+    package_versions,
+    platform_info,
+    sha256_file,
+    source_hash,
+    stage_module,
+)
+from pipeline.artifacts.locking import TMP_PREFIX, VersionLock, lock_version, remove_stale_tmp
 
 T = TypeVar("T")
 S = TypeVar("S")
 MANIFEST = "manifest.json"
 LATEST = "latest"
-TMP_PREFIX = ".tmp-"
-LOCK_PREFIX = ".lock-"
 STATE_DIR = ".resume"  # inside the work folder: resume data, never part of the artifact
-STALE_TMP_S = 3600.0  # random-named .tmp-* entries older than this are removed
-RESUME_KEEP_S = 7 * 24 * 3600.0  # unlocked work folders of other versions older than this too
-LOCK_GRACE_S = 10.0  # how long to wait for the workers of a killed run to exit
-_RANDOM_TMP = re.compile(r"^\.tmp-.+-[0-9a-f]{8}$")  # .tmp-<version>-<random>, old-, latest-
-
-
-class ArtifactError(RuntimeError):
-    """A missing, incomplete or corrupted artifact; the message says what to do."""
 
 
 @dataclass
@@ -132,9 +128,13 @@ class StageRun:
                 path.unlink(missing_ok=True)
         return kept
 
-    def finished_shards(self, tasks: Sequence[T], keep: Iterable[Path | str],
-                        from_file: Callable[[T], S | None],
-                        output: Callable[[T], Path | str]) -> dict[T, S]:
+    def finished_shards(
+        self,
+        tasks: Sequence[T],
+        keep: Iterable[Path | str],
+        from_file: Callable[[T], S | None],
+        output: Callable[[T], Path | str],
+    ) -> dict[T, S]:
         """The shards an interrupted run of this version finished: ``{task: from_file(task)}``
         for every task whose output file is usable (``from_file`` re-reads and checks it, None
         when it cannot be used). Everything else in the work folder but ``keep`` is deleted,
@@ -154,7 +154,7 @@ class StageRun:
 
 
 def _now_iso() -> str:
-    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    return _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
 
 
 def _hash_files(folder: Path) -> dict[str, dict[str, Any]]:
@@ -171,160 +171,6 @@ def point_latest(stage_dir: Path, version: str) -> None:
     tmp = stage_dir / f"{TMP_PREFIX}latest-{uuid.uuid4().hex[:8]}"
     os.symlink(version, tmp)
     os.replace(tmp, stage_dir / LATEST)
-
-
-# ----------------------------------------------------------------------------- locking
-
-_HELD_LOCKS: set[int] = set()  # lock file descriptors this process holds
-_FORK_PARENT = 0
-
-
-def _before_fork() -> None:
-    global _FORK_PARENT
-    _FORK_PARENT = os.getpid()
-
-
-def _prctl():
-    """libc's ``prctl`` (Linux), looked up in the parent so that a forked child only calls it."""
-    global _PRCTL
-    if _PRCTL is None and sys.platform.startswith("linux"):
-        try:
-            import ctypes
-
-            _PRCTL = ctypes.CDLL(None, use_errno=True).prctl
-        except (OSError, AttributeError):  # pragma: no cover
-            _PRCTL = False
-    return _PRCTL
-
-
-_PRCTL = None
-
-
-def _after_fork_in_child() -> None:
-    """A process forked while a stage lock is held (a worker of the stage) dies with its
-    parent: after ``kill -9`` of the stage, no orphan keeps writing into the work folder."""
-    if not _HELD_LOCKS or not _PRCTL:
-        return
-    _PRCTL(1, 9)  # PR_SET_PDEATHSIG, SIGKILL
-    if os.getppid() != _FORK_PARENT:  # the parent died before prctl took effect
-        os._exit(1)
-
-
-if hasattr(os, "register_at_fork"):
-    os.register_at_fork(before=_before_fork, after_in_child=_after_fork_in_child)
-
-
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
-class _VersionLock:
-    """Exclusive, non-blocking ``flock`` on ``<stage_dir>/.lock-<version>`` (module docstring)."""
-
-    def __init__(self, path: Path) -> None:
-        self.path = path
-        self.fd: int | None = None
-
-    def try_acquire(self) -> bool:
-        while True:
-            fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except OSError as e:
-                os.close(fd)
-                if e.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
-                    return False
-                raise
-            try:
-                st = os.stat(self.path)
-            except FileNotFoundError:
-                st = None
-            mine = os.fstat(fd)
-            if st is not None and (st.st_ino, st.st_dev) == (mine.st_ino, mine.st_dev):
-                os.ftruncate(fd, 0)
-                os.write(fd, f"{os.getpid()}\n".encode())
-                self.fd = fd
-                _prctl()
-                _HELD_LOCKS.add(fd)
-                return True
-            os.close(fd)  # its holder removed the file after we opened it: lock the new one
-
-    def holder(self) -> int | None:
-        try:
-            return int(self.path.read_text().strip())
-        except (OSError, ValueError):
-            return None
-
-    def release(self) -> None:
-        if self.fd is None:
-            return
-        fd, self.fd = self.fd, None
-        _HELD_LOCKS.discard(fd)
-        try:
-            self.path.unlink(missing_ok=True)
-        finally:
-            fcntl.flock(fd, fcntl.LOCK_UN)
-            os.close(fd)
-
-
-def _lock_version(stage_dir: Path, stage: str, version: str, work_dir: Path) -> _VersionLock:
-    """The version's lock, or ArtifactError when another live run of it holds the lock."""
-    lock = _VersionLock(stage_dir / f"{LOCK_PREFIX}{version}")
-    deadline = time.monotonic() + LOCK_GRACE_S
-    while not lock.try_acquire():
-        pid = lock.holder()
-        if pid is not None and not _pid_alive(pid) and time.monotonic() < deadline:
-            time.sleep(0.1)  # a killed run's forked workers are still exiting
-            continue
-        if pid is None or _pid_alive(pid):
-            who = f"pid {pid}" if pid is not None else "another process"
-            fix = (f"wait for it to finish, or stop it (`kill {pid}`) and run the stage again"
-                   if pid is not None else "wait for it to finish")
-        else:
-            who = (f"pid {pid} has exited, but processes it started still hold the lock "
-                   f"`{lock.path}`")
-            fix = f"stop them (`fuser -k {lock.path}`) and run the stage again"
-        raise ArtifactError(
-            f"[{stage}] another run of {stage} {version} is writing {work_dir} ({who}); {fix}."
-            " A run killed part-way resumes where it stopped.")
-    return lock
-
-
-def _remove_path(path: Path) -> None:
-    if path.is_dir() and not path.is_symlink():
-        shutil.rmtree(path, ignore_errors=True)
-    else:
-        path.unlink(missing_ok=True)
-
-
-def _remove_stale_tmp(stage_dir: Path, current: str) -> None:
-    """Remove what interrupted runs left, except what a live run or a rerun may still use
-    (module docstring): called with the lock of version ``current`` held."""
-    now = time.time()
-    for path in stage_dir.glob(f"{TMP_PREFIX}*"):
-        try:
-            age = now - path.lstat().st_mtime
-            if path.name.startswith(f"{TMP_PREFIX}old-{current}-"):
-                _remove_path(path)  # ours: left by a run of this version killed while swapping
-            elif _RANDOM_TMP.match(path.name) or not path.is_dir() or path.is_symlink():
-                if age >= STALE_TMP_S:  # a concurrent run of older code may still write there
-                    _remove_path(path)
-            elif path.name != f"{TMP_PREFIX}{current}" and age >= RESUME_KEEP_S:
-                other = path.name[len(TMP_PREFIX):]
-                lock = _VersionLock(stage_dir / f"{LOCK_PREFIX}{other}")
-                if lock.try_acquire():  # nobody is writing there
-                    try:
-                        _remove_path(path)
-                    finally:
-                        lock.release()
-        except FileNotFoundError:
-            pass
 
 
 class ArtifactWriter:
@@ -349,7 +195,7 @@ class ArtifactWriter:
     ) -> None:
         self.stage_dir = Path(data_root) / stage
         self.force = force
-        self._lock: _VersionLock | None = None
+        self._lock: VersionLock | None = None
         self.run = StageRun(
             stage=stage,
             version=version,
@@ -367,9 +213,9 @@ class ArtifactWriter:
     def __enter__(self) -> StageRun:
         run = self.run
         self.stage_dir.mkdir(parents=True, exist_ok=True)
-        self._lock = _lock_version(self.stage_dir, run.stage, run.version, run.work_dir)
+        self._lock = lock_version(self.stage_dir, run.stage, run.version, run.work_dir)
         try:
-            _remove_stale_tmp(self.stage_dir, run.version)
+            remove_stale_tmp(self.stage_dir, run.version)
             work = run.work_dir
             if work.is_symlink() or (work.exists() and not work.is_dir()):
                 work.unlink()
@@ -482,13 +328,16 @@ def run_stage(
     Raises:
         ArtifactError: another live process is writing this version.
     """
-    writer = ArtifactWriter(data_root, stage, version, config, upstream, seed,
-                            resumable=resumable, force=force)
+    writer = ArtifactWriter(
+        data_root, stage, version, config, upstream, seed, resumable=resumable, force=force
+    )
 
     def reuse() -> Path:
         point_latest(writer.stage_dir, version)
-        say(f"[{stage}] version {version} already exists at {writer.run.final_dir}: reusing it "
-            f"(pass {stage}.force=true to recompute).")
+        say(
+            f"[{stage}] version {version} already exists at {writer.run.final_dir}: reusing it "
+            f"(pass {stage}.force=true to recompute)."
+        )
         return writer.run.final_dir
 
     if writer.exists() and not force:
@@ -501,8 +350,10 @@ def run_stage(
             body(run)
         except BaseException as e:
             if resumable and not isinstance(e, Exception):
-                say(f"[{stage}] interrupted: the finished work is kept in {run.work_dir}; run "
-                    "the stage again with the same settings to resume.")
+                say(
+                    f"[{stage}] interrupted: the finished work is kept in {run.work_dir}; run "
+                    "the stage again with the same settings to resume."
+                )
             raise
     say(f"[{stage}] wrote version {version} to {run.final_dir}")
     return run.final_dir
@@ -513,14 +364,23 @@ def available_versions(data_root: Path, stage: str) -> list[str]:
     if not stage_dir.is_dir():
         return []
     return sorted(
-        p.name for p in stage_dir.iterdir()
-        if p.is_dir() and not p.is_symlink() and not p.name.startswith(".")
+        p.name
+        for p in stage_dir.iterdir()
+        if p.is_dir()
+        and not p.is_symlink()
+        and not p.name.startswith(".")
         and (p / MANIFEST).is_file()
     )
 
 
-def resolve_artifact(data_root: Path, stage: str, version: str = "latest", *,
-                     verify: bool = False, key: str | None = None) -> Path:
+def resolve_artifact(
+    data_root: Path,
+    stage: str,
+    version: str = "latest",
+    *,
+    verify: bool = False,
+    key: str | None = None,
+) -> Path:
     """Folder of a complete artifact, by version key or ``"latest"``; a clear error otherwise.
 
     Args:
@@ -539,8 +399,9 @@ def resolve_artifact(data_root: Path, stage: str, version: str = "latest", *,
     asked = f"{key}={version}" if key else f"version '{version}'"
     who = f"[{key.split('.')[0]}] " if key else ""
     if not version or version.startswith(".") or "/" in version or "\\" in version:
-        raise ArtifactError(f"{who}{asked}: '{version}' is not a version name: give a version "
-                            "key or 'latest'.")
+        raise ArtifactError(
+            f"{who}{asked}: '{version}' is not a version name: give a version key or 'latest'."
+        )
     folder = stage_dir / version
     if (folder / MANIFEST).is_file():
         folder = folder.resolve()
@@ -548,12 +409,13 @@ def resolve_artifact(data_root: Path, stage: str, version: str = "latest", *,
     known = available_versions(data_root, stage)
     if known:
         hint = f"available versions: {', '.join(known)}"
-        fix = (f"pass {key}=<one of those> or {key}=latest" if key
-               else "give one of those or 'latest'")
-        fix += f", or run `make {stage}` (`python -m pipeline.{stage}`) to create it"
+        fix = (
+            f"pass {key}=<one of those> or {key}=latest" if key else "give one of those or 'latest'"
+        )
+        fix += f", or run `make {stage}` (`python -m {stage_module(stage)}`) to create it"
     else:
         hint = "none exist yet"
-        fix = f"run `make {stage}` (or `python -m pipeline.{stage}`) first"
+        fix = f"run `make {stage}` (or `python -m {stage_module(stage)}`) first"
     raise ArtifactError(
         f"{who}{asked}: no complete '{stage}' artifact named '{version}' under {stage_dir} "
         f"({hint}). Fix: {fix}."
@@ -586,7 +448,8 @@ def artifact_file(folder: Path, rel: str) -> Path:
         raise ArtifactError(
             f"{folder}: the file name {rel!r} it lists {bad}; the artifact is corrupted or was "
             f"tampered with. Fix: recompute it (the {stage} stage with {stage}.force=true), or "
-            "run `make verify` to list every problem.")
+            "run `make verify` to list every problem."
+        )
     return folder / rel
 
 
@@ -616,7 +479,9 @@ def load_manifest(folder: Path) -> dict[str, Any]:
     except FileNotFoundError:
         raise ArtifactError(f"{folder} has no {MANIFEST}: it is not a complete artifact.") from None
     except json.JSONDecodeError as e:
-        raise ArtifactError(f"{path} is not valid JSON ({e}); recompute the stage with force=true.") from None
+        raise ArtifactError(
+            f"{path} is not valid JSON ({e}); recompute the stage with force=true."
+        ) from None
 
 
 def verify_artifact(folder: Path) -> list[str]:
@@ -646,8 +511,9 @@ def verify_artifact(folder: Path) -> list[str]:
             problems.append(f"{rel}: the manifest's entry lacks bytes / sha256")
             continue
         if path.stat().st_size != size:
-            problems.append(f"{rel}: changed ({path.stat().st_size} bytes, the manifest says "
-                            f"{size})")
+            problems.append(
+                f"{rel}: changed ({path.stat().st_size} bytes, the manifest says {size})"
+            )
         elif sha256_file(path) != sha:
             problems.append(f"{rel}: changed (sha256 differs from the manifest)")
     listed = set(files)

@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import hashlib
 import json
-from typing import Any, Iterable, Mapping
+from collections.abc import Iterable, Mapping
+from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
@@ -48,8 +49,7 @@ def stage_config(
 
 
 def compute_version(
-    stage: str, config: Mapping[str, Any], upstream: Mapping[str, str],
-    code_of: str | None = None,
+    stage: str, config: Mapping[str, Any], upstream: Mapping[str, str], code_of: str | None = None
 ) -> str:
     """Hex key naming the artifact a stage would produce from these inputs.
 

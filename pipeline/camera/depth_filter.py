@@ -31,8 +31,7 @@ _KERNEL = np.ones((3, 3), np.uint8)
 EDGE_JUMP_M = 0.01  # a fill within this of the farthest depth nearby comes from the far side
 
 
-def fill_holes(depth_m: np.ndarray, iterations: int, edge_jump: float = EDGE_JUMP_M
-               ) -> np.ndarray:
+def fill_holes(depth_m: np.ndarray, iterations: int, edge_jump: float = EDGE_JUMP_M) -> np.ndarray:
     """Fill pixels without data (0) from their far side, ``iterations`` passes
     (module docstring). Returns a new float32 array; pixels with data are unchanged."""
     out = np.asarray(depth_m, np.float32).copy()
@@ -63,8 +62,9 @@ def median_filter(depth_m: np.ndarray, ksize: int) -> np.ndarray:
     depth = np.ascontiguousarray(depth_m, np.float32)
     valid = depth > 0
     out = cv2.medianBlur(depth, ksize)
-    near_hole = valid & (cv2.dilate((~valid).astype(np.uint8),
-                                    np.ones((ksize, ksize), np.uint8)) > 0)
+    near_hole = valid & (
+        cv2.dilate((~valid).astype(np.uint8), np.ones((ksize, ksize), np.uint8)) > 0
+    )
     if near_hole.any():
         r = ksize // 2
         padded = np.pad(np.where(valid, depth, np.inf), r, constant_values=np.inf)

@@ -45,26 +45,34 @@ the descriptor ``(None, "no_depth_at_seed")`` for it.
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
 MIN_DEPTH_M = 0.05
 MAX_DEPTH_M = 10.0
 
-CONVERT_HINT = ("convert a raw sensor image with its depth unit first: "
-                "depth_m = raw.astype(np.float32) * depth_unit (e.g. depth_unit = 0.001 for "
-                "millimetres; the generation artifact stores it as depth_unit)")
+CONVERT_HINT = (
+    "convert a raw sensor image with its depth unit first: "
+    "depth_m = raw.astype(np.float32) * depth_unit (e.g. depth_unit = 0.001 for "
+    "millimetres; the generation artifact stores it as depth_unit)"
+)
 
 
 class DepthImageError(ValueError):
     """A depth image that cannot be used as it is (shape, dtype, not an array)."""
 
 
-def check_depth_image(depth, expected_shape: Sequence[int] | None = None, *,
-                      name: str = "depth", allow_batch: bool = False,
-                      shape_source: str = "the camera intrinsics",
-                      min_depth: float = MIN_DEPTH_M, max_depth: float = MAX_DEPTH_M) -> np.ndarray:
+def check_depth_image(
+    depth,
+    expected_shape: Sequence[int] | None = None,
+    *,
+    name: str = "depth",
+    allow_batch: bool = False,
+    shape_source: str = "the camera intrinsics",
+    min_depth: float = MIN_DEPTH_M,
+    max_depth: float = MAX_DEPTH_M,
+) -> np.ndarray:
     """Validate and sanitise a depth image (see the module docstring for the policy).
 
     Args:
@@ -91,33 +99,54 @@ def check_depth_image(depth, expected_shape: Sequence[int] | None = None, *,
     try:
         arr = np.asarray(depth)
     except Exception as exc:  # ragged lists, tensors on a GPU, objects without __array__
-        raise DepthImageError(f"{name} must be an array of z-depths in metres, got "
-                              f"{type(depth).__name__} that numpy cannot read as one array "
-                              f"({exc}); pass an (H, W) float32 numpy array") from None
+        raise DepthImageError(
+            f"{name} must be an array of z-depths in metres, got "
+            f"{type(depth).__name__} that numpy cannot read as one array "
+            f"({exc}); pass an (H, W) float32 numpy array"
+        ) from None
     kind = arr.dtype.kind
     if kind != "f":
-        what = {"u": "an unsigned integer", "i": "an integer", "b": "a boolean (a mask?)",
-                "c": "a complex", "O": "an object", "U": "a string", "S": "a bytes",
-                "M": "a datetime", "m": "a timedelta", "V": "a structured"}.get(kind, "a")
+        what = {
+            "u": "an unsigned integer",
+            "i": "an integer",
+            "b": "a boolean (a mask?)",
+            "c": "a complex",
+            "O": "an object",
+            "U": "a string",
+            "S": "a bytes",
+            "M": "a datetime",
+            "m": "a timedelta",
+            "V": "a structured",
+        }.get(kind, "a")
         if kind == "O" and arr.ndim == 0:
-            raise DepthImageError(f"{name} must be an array of z-depths in metres, got "
-                                  f"{type(depth).__name__}; pass an (H, W) float32 numpy array")
+            raise DepthImageError(
+                f"{name} must be an array of z-depths in metres, got "
+                f"{type(depth).__name__}; pass an (H, W) float32 numpy array"
+            )
         hint = CONVERT_HINT if kind in "uib" else "pass real z-depths in metres"
-        raise DepthImageError(f"{name} must be float32/float64 metres, got {what} dtype "
-                              f"({arr.dtype}); {hint}")
+        raise DepthImageError(
+            f"{name} must be float32/float64 metres, got {what} dtype ({arr.dtype}); {hint}"
+        )
     want = "(H, W)" if expected_shape is None else f"{tuple(int(s) for s in expected_shape)}"
     if allow_batch:
         want = f"(..., {want[1:]}" if expected_shape is not None else "(..., H, W)"
     if arr.ndim < 2 or (arr.ndim != 2 and not allow_batch):
-        extra = (" (a multi-channel image? pass the depth channel alone)" if arr.ndim == 3
-                 and not allow_batch else "")
-        raise DepthImageError(f"{name} must be a {want} image of z-depths in metres, got "
-                              f"{arr.ndim}-D shape {arr.shape}{extra}")
+        extra = (
+            " (a multi-channel image? pass the depth channel alone)"
+            if arr.ndim == 3 and not allow_batch
+            else ""
+        )
+        raise DepthImageError(
+            f"{name} must be a {want} image of z-depths in metres, got "
+            f"{arr.ndim}-D shape {arr.shape}{extra}"
+        )
     if expected_shape is not None:
         if tuple(arr.shape[-2:]) != tuple(int(s) for s in expected_shape):
-            raise DepthImageError(f"{name} has shape {arr.shape}, expected {want} (from "
-                                  f"{shape_source}); pass the image the intrinsics describe, or "
-                                  "resize/crop it and its intrinsics together")
+            raise DepthImageError(
+                f"{name} has shape {arr.shape}, expected {want} (from "
+                f"{shape_source}); pass the image the intrinsics describe, or "
+                "resize/crop it and its intrinsics together"
+            )
     elif arr.shape[-1] == 0 or arr.shape[-2] == 0:
         raise DepthImageError(f"{name} is empty (shape {arr.shape}): no pixels to plan on")
     with np.errstate(over="ignore", invalid="ignore"):
@@ -127,4 +156,3 @@ def check_depth_image(depth, expected_shape: Sequence[int] | None = None, *,
         good &= ~np.broadcast_to(mask, out.shape)
     out[~good] = 0.0
     return out
-

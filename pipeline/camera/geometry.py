@@ -27,9 +27,15 @@ class Intrinsics:
     cy: float
 
     @classmethod
-    def from_config(cls, cam) -> "Intrinsics":
-        return cls(int(cam.width), int(cam.height), float(cam.fx), float(cam.fy),
-                   float(cam.cx), float(cam.cy))
+    def from_config(cls, cam) -> Intrinsics:
+        return cls(
+            int(cam.width),
+            int(cam.height),
+            float(cam.fx),
+            float(cam.fy),
+            float(cam.cx),
+            float(cam.cy),
+        )
 
     @property
     def K(self) -> np.ndarray:
@@ -37,8 +43,14 @@ class Intrinsics:
         return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
 
     def as_dict(self) -> dict[str, float]:
-        return {"width": self.width, "height": self.height, "fx": self.fx, "fy": self.fy,
-                "cx": self.cx, "cy": self.cy}
+        return {
+            "width": self.width,
+            "height": self.height,
+            "fx": self.fx,
+            "fy": self.fy,
+            "cx": self.cx,
+            "cy": self.cy,
+        }
 
 
 def backproject(depth_m: np.ndarray, intr: Intrinsics) -> np.ndarray:
@@ -69,8 +81,9 @@ def backproject_pixels(uv: np.ndarray, z: np.ndarray, intr: Intrinsics) -> np.nd
     float64 metres: the inverse of ``project`` (``backproject`` does a whole image)."""
     uv = np.asarray(uv, dtype=np.float64)
     z = np.asarray(z, dtype=np.float64)
-    return np.stack([(uv[..., 0] - intr.cx) / intr.fx * z, (uv[..., 1] - intr.cy) / intr.fy * z,
-                     z], axis=-1)
+    return np.stack(
+        [(uv[..., 0] - intr.cx) / intr.fx * z, (uv[..., 1] - intr.cy) / intr.fy * z, z], axis=-1
+    )
 
 
 def project(points_cam: np.ndarray, intr: Intrinsics) -> np.ndarray:
@@ -110,11 +123,14 @@ def rotation_matrices(quats_xyzw: np.ndarray) -> np.ndarray:
     """(..., 4) unit quaternions (x, y, z, w) → (..., 3, 3) rotation matrices, float64."""
     q = np.asarray(quats_xyzw, dtype=np.float64)
     x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
-        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
-        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
-    ], -2)
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        -2,
+    )
 
 
 def pose_matrix(position: np.ndarray, quat_xyzw: np.ndarray) -> np.ndarray:

@@ -58,8 +58,10 @@ def boxes_from_pybullet(client: int, body_ids=None) -> list[BoxShape]:
         UnsupportedGeometry: a listed body has a visible shape that is not a box, or links.
     """
     if body_ids is None:
-        body_ids = [p.getBodyUniqueId(i, physicsClientId=client)
-                    for i in range(p.getNumBodies(physicsClientId=client))]
+        body_ids = [
+            p.getBodyUniqueId(i, physicsClientId=client)
+            for i in range(p.getNumBodies(physicsClientId=client))
+        ]
     out = []
     for body in body_ids:
         shapes = p.getVisualShapeData(body, physicsClientId=client)
@@ -75,7 +77,8 @@ def boxes_from_pybullet(client: int, body_ids=None) -> list[BoxShape]:
                 raise UnsupportedGeometry(
                     f"body {body} has a visible {'link' if link != -1 else 'base'} shape of "
                     f"pybullet geometry type {geom}: the ray-cast renderer draws base boxes "
-                    "only. Leave that body out of `bodies`, or use camera.renderer=tinyrenderer")
+                    "only. Leave that body out of `bodies`, or use camera.renderer=tinyrenderer"
+                )
             if T_body is None:
                 T_body = pose_matrix(pos, quat)
             T = T_body @ pose_matrix(local_pos, local_orn)
@@ -108,12 +111,14 @@ def ray_grid(intr: Intrinsics) -> RayGrid:
     return grid
 
 
-_CORNERS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)],
-                    np.float64)
+_CORNERS = np.array(
+    [[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], np.float64
+)
 
 
-def _footprint(R_cb: np.ndarray, c: np.ndarray, half: np.ndarray, intr: Intrinsics,
-               near: float, far: float) -> tuple[int, int, int, int] | None:
+def _footprint(
+    R_cb: np.ndarray, c: np.ndarray, half: np.ndarray, intr: Intrinsics, near: float, far: float
+) -> tuple[int, int, int, int] | None:
     """Pixel rectangle [u0, u1) × [v0, v1) that holds every pixel centre whose ray can meet the
     box (camera-frame centre ``c``, axes ``R_cb``), or None when the box is out of view."""
     pts = (_CORNERS * half) @ R_cb.T + c  # (8, 3) corners in the camera frame
@@ -132,8 +137,9 @@ def _footprint(R_cb: np.ndarray, c: np.ndarray, half: np.ndarray, intr: Intrinsi
     return u0, u1, v0, v1
 
 
-def raycast_boxes(boxes: list[BoxShape], intr: Intrinsics, T_world_cam: np.ndarray,
-                  near: float, far: float) -> tuple[np.ndarray, np.ndarray]:
+def raycast_boxes(
+    boxes: list[BoxShape], intr: Intrinsics, T_world_cam: np.ndarray, near: float, far: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Z-depth and body ids of the nearest box surface through every pixel centre.
 
     Args:
@@ -193,8 +199,15 @@ def raycast_boxes(boxes: list[BoxShape], intr: Intrinsics, T_world_cam: np.ndarr
     return depth, ids
 
 
-def fill_ground(depth: np.ndarray, body_ids: np.ndarray, intr: Intrinsics,
-                T_world_cam: np.ndarray, ground_z: float, ground_id: int, far: float) -> None:
+def fill_ground(
+    depth: np.ndarray,
+    body_ids: np.ndarray,
+    intr: Intrinsics,
+    T_world_cam: np.ndarray,
+    ground_z: float,
+    ground_id: int,
+    far: float,
+) -> None:
     """In place: where ``body_ids`` is −1, the z-depth of the horizontal plane world
     z = ``ground_z`` and ``ground_id``, for rays that meet it in front of the camera nearer than
     ``far``.

@@ -63,8 +63,9 @@ def convex_shape(body_id: int, vertices_world: np.ndarray) -> ConvexShape:
     return ConvexShape(int(body_id), eq[:, :3].copy(), -eq[:, 3], pts[hull.vertices])
 
 
-_CORNERS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)],
-                    np.float64)
+_CORNERS = np.array(
+    [[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], np.float64
+)
 
 
 def box_shape(body_id: int, T_world_box: np.ndarray, half_extents: np.ndarray) -> ConvexShape:
@@ -89,16 +90,20 @@ def convex_from_pybullet(client: int, body_ids=None) -> list[ConvexShape]:
         UnsupportedGeometry: a listed body has links or another kind of collision shape.
     """
     if body_ids is None:
-        body_ids = [p.getBodyUniqueId(i, physicsClientId=client)
-                    for i in range(p.getNumBodies(physicsClientId=client))]
+        body_ids = [
+            p.getBodyUniqueId(i, physicsClientId=client)
+            for i in range(p.getNumBodies(physicsClientId=client))
+        ]
     out = []
     for body in body_ids:
         visual = p.getVisualShapeData(body, physicsClientId=client)
         if not visual or all(s[7][3] <= 0.0 for s in visual):
             continue
         if p.getNumJoints(body, physicsClientId=client) > 0:
-            raise UnsupportedGeometry(f"body {body} has links: the convex ray-cast renderer "
-                                      "draws single rigid bodies only")
+            raise UnsupportedGeometry(
+                f"body {body} has links: the convex ray-cast renderer "
+                "draws single rigid bodies only"
+            )
         pos, quat = p.getBasePositionAndOrientation(body, physicsClientId=client)
         T_base = pose_matrix(np.asarray(pos), np.asarray(quat))
         for k, s in enumerate(p.getCollisionShapeData(body, -1, physicsClientId=client)):
@@ -113,14 +118,16 @@ def convex_from_pybullet(client: int, body_ids=None) -> list[ConvexShape]:
             else:
                 raise UnsupportedGeometry(
                     f"body {body} has a collision shape of pybullet geometry type {geom}: the "
-                    "convex ray-cast renderer draws boxes and convex meshes only")
+                    "convex ray-cast renderer draws boxes and convex meshes only"
+                )
             world = np.asarray(local, np.float64) @ T[:3, :3].T + T[:3, 3]
             out.append(convex_shape(int(body), world))
     return out
 
 
-def raycast_convex(shapes: list[ConvexShape], intr: Intrinsics, T_world_cam: np.ndarray,
-                   near: float, far: float) -> tuple[np.ndarray, np.ndarray]:
+def raycast_convex(
+    shapes: list[ConvexShape], intr: Intrinsics, T_world_cam: np.ndarray, near: float, far: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Z-depth and body ids of the nearest convex surface through every pixel centre.
 
     Args:
@@ -179,9 +186,16 @@ def raycast_convex(shapes: list[ConvexShape], intr: Intrinsics, T_world_cam: np.
     return depth.astype(np.float32), ids
 
 
-def render_convex_depth(client: int, intr: Intrinsics, T_world_cam: np.ndarray, near: float,
-                        far: float, *, ground: tuple[float, int] | None = None,
-                        bodies=None):
+def render_convex_depth(
+    client: int,
+    intr: Intrinsics,
+    T_world_cam: np.ndarray,
+    near: float,
+    far: float,
+    *,
+    ground: tuple[float, int] | None = None,
+    bodies=None,
+):
     """``pipeline.camera.render.render_depth``'s ``"raycast"`` path for a world of convex
     bodies (boxes and convex meshes): a ``DepthFrame`` of the bodies ``bodies`` (default every
     body of the client), with the analytic ground ``(z, body_id)`` filled in where nothing is
@@ -189,8 +203,7 @@ def render_convex_depth(client: int, intr: Intrinsics, T_world_cam: np.ndarray, 
     from pipeline.camera.raycast import fill_ground
     from pipeline.camera.render import DepthFrame
 
-    depth, ids = raycast_convex(convex_from_pybullet(client, bodies), intr, T_world_cam, near,
-                                far)
+    depth, ids = raycast_convex(convex_from_pybullet(client, bodies), intr, T_world_cam, near, far)
     if ground is not None:
         fill_ground(depth, ids, intr, T_world_cam, ground[0], ground[1], far)
     return DepthFrame(depth_m=depth, body_ids=ids)

@@ -9,8 +9,8 @@ rasterisers sample pixel centres half a pixel away from that convention (docs/si
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 import pybullet as p
@@ -66,20 +66,28 @@ RENDERERS = ("tinyrenderer", "raycast")
 def check_renderer(name: str) -> None:
     """Raise a ValueError naming the choices unless ``name`` is a renderer."""
     if name not in RENDERERS:
-        raise ValueError(f"unknown renderer {name!r}: camera.renderer must be one of "
-                         f"{', '.join(RENDERERS)}")
+        raise ValueError(
+            f"unknown renderer {name!r}: camera.renderer must be one of {', '.join(RENDERERS)}"
+        )
 
 
 def render_depth(
-    client: int, intr: Intrinsics, T_world_cam: np.ndarray, near: float, far: float, *,
-    renderer: str, ground: tuple[float, int] | None = None,
+    client: int,
+    intr: Intrinsics,
+    T_world_cam: np.ndarray,
+    near: float,
+    far: float,
+    *,
+    renderer: str,
+    ground: tuple[float, int] | None = None,
     bodies: Sequence[int] | None = None,
 ) -> DepthFrame:
     """Render metric depth and body ids of the current pybullet state.
 
     Args:
         renderer: ``camera.renderer``: ``"tinyrenderer"`` (pybullet's software rasteriser, the
-            reference) or ``"raycast"`` (``pipeline.camera.raycast``: exact ray/box intersection of the same
+            reference) or ``"raycast"`` (``pipeline.camera.raycast``: exact ray/box intersection of
+            the same
             world, several times faster; ``tests/test_raycast.py`` checks that both give the
             same mask and depth within 0.1 mm). (pybullet's EGL plugin gives pixel-identical
             images to TinyRenderer but was no faster on a 2-core CPU with Mesa llvmpipe.)
@@ -91,14 +99,17 @@ def render_depth(
             about 1 ms and is exact.
     """
     if renderer == "raycast":
-        depth, seg = raycast_boxes(boxes_from_pybullet(client, bodies), intr, T_world_cam,
-                                   near, far)
+        depth, seg = raycast_boxes(
+            boxes_from_pybullet(client, bodies), intr, T_world_cam, near, far
+        )
     elif renderer == "tinyrenderer":
         _, _, _, depth_buffer, seg = p.getCameraImage(
-            intr.width, intr.height,
+            intr.width,
+            intr.height,
             viewMatrix=view_matrix(T_world_cam),
             projectionMatrix=projection_matrix(intr, near, far),
-            renderer=p.ER_TINY_RENDERER, physicsClientId=client,
+            renderer=p.ER_TINY_RENDERER,
+            physicsClientId=client,
         )
         d = np.asarray(depth_buffer, dtype=np.float64).reshape(intr.height, intr.width)
         depth = (far * near / (far - (far - near) * d)).astype(np.float32)

@@ -156,8 +156,9 @@ def steep_dropout(theta: np.ndarray, sensor_cfg, rng: np.random.Generator) -> np
     return rng.random(theta.shape) < prob
 
 
-def hole_mask(shape: tuple[int, int], rate: float, size_px: int,
-              rng: np.random.Generator) -> np.ndarray:
+def hole_mask(
+    shape: tuple[int, int], rate: float, size_px: int, rng: np.random.Generator
+) -> np.ndarray:
     """(H, W) bool: the image cut into ``size_px`` × ``size_px`` blocks, each lost with
     probability ``rate`` (so about ``rate`` of the image is lost, in square blobs)."""
     if size_px < 1:
@@ -182,8 +183,9 @@ def noise_sigma(z: np.ndarray, theta: np.ndarray, sensor_cfg) -> np.ndarray:
     return sigma
 
 
-def apply_sensor_model(depth_m: np.ndarray, sensor_cfg, rng: np.random.Generator,
-                       intr: Intrinsics) -> np.ndarray:
+def apply_sensor_model(
+    depth_m: np.ndarray, sensor_cfg, rng: np.random.Generator, intr: Intrinsics
+) -> np.ndarray:
     """What the sensor returns for an ideal depth image (module docstring).
 
     Args:
@@ -200,8 +202,10 @@ def apply_sensor_model(depth_m: np.ndarray, sensor_cfg, rng: np.random.Generator
         return depth_m
     z = np.asarray(depth_m, np.float64)
     if z.shape != (intr.height, intr.width):
-        raise ValueError(f"depth image has shape {z.shape}, expected (H, W) = "
-                         f"({intr.height}, {intr.width}) from the camera intrinsics")
+        raise ValueError(
+            f"depth image has shape {z.shape}, expected (H, W) = "
+            f"({intr.height}, {intr.width}) from the camera intrinsics"
+        )
     valid = z > 0
     theta = incidence_angles(z, intr)
     out = z + rng.normal(size=z.shape) * noise_sigma(z, theta, sensor_cfg)
@@ -210,7 +214,8 @@ def apply_sensor_model(depth_m: np.ndarray, sensor_cfg, rng: np.random.Generator
     lost |= steep_dropout(theta, sensor_cfg, rng)
     if float(sensor_cfg.edge_dropout_prob) > 0:
         lost |= depth_steps(z, float(sensor_cfg.edge_jump)) & (
-            rng.random(z.shape) < float(sensor_cfg.edge_dropout_prob))
+            rng.random(z.shape) < float(sensor_cfg.edge_dropout_prob)
+        )
     if float(sensor_cfg.hole_rate) > 0:
         lost |= hole_mask(z.shape, float(sensor_cfg.hole_rate), int(sensor_cfg.hole_size_px), rng)
     out = out * (1.0 + float(sensor_cfg.depth_scale_error)) + float(sensor_cfg.depth_bias)

@@ -11,14 +11,15 @@ from __future__ import annotations
 import pybullet as p
 
 
-def _static_box(client: int, half_extents, position, rgba, friction: float,
-                anchor: bool) -> int:
+def _static_box(client: int, half_extents, position, rgba, friction: float, anchor: bool) -> int:
     col = p.createCollisionShape(p.GEOM_BOX, halfExtents=half_extents, physicsClientId=client)
-    vis = p.createVisualShape(p.GEOM_BOX, halfExtents=half_extents, rgbaColor=rgba,
-                              physicsClientId=client)
+    vis = p.createVisualShape(
+        p.GEOM_BOX, halfExtents=half_extents, rgbaColor=rgba, physicsClientId=client
+    )
     body = p.createMultiBody(0.0, col, vis, basePosition=position, physicsClientId=client)
-    p.changeDynamics(body, -1, lateralFriction=friction, frictionAnchor=int(anchor),
-                     physicsClientId=client)
+    p.changeDynamics(
+        body, -1, lateralFriction=friction, frictionAnchor=int(anchor), physicsClientId=client
+    )
     return body
 
 
@@ -49,9 +50,25 @@ def build_cell(client: int, bin_cfg, physics_cfg) -> list[int]:
     wall_z = (h - ft) / 2.0  # walls run from the ground up to h above the bin floor
     half_h = (h + ft) / 2.0
     for sx in (-1, 1):
-        bodies.append(_static_box(client, [t / 2, ly / 2 + t, half_h],
-                                  [sx * (lx / 2 + t / 2), 0, wall_z], blue, fr, anchor))
+        bodies.append(
+            _static_box(
+                client,
+                [t / 2, ly / 2 + t, half_h],
+                [sx * (lx / 2 + t / 2), 0, wall_z],
+                blue,
+                fr,
+                anchor,
+            )
+        )
     for sy in (-1, 1):
-        bodies.append(_static_box(client, [lx / 2, t / 2, half_h],
-                                  [0, sy * (ly / 2 + t / 2), wall_z], blue, fr, anchor))
+        bodies.append(
+            _static_box(
+                client,
+                [lx / 2, t / 2, half_h],
+                [0, sy * (ly / 2 + t / 2), wall_z],
+                blue,
+                fr,
+                anchor,
+            )
+        )
     return bodies

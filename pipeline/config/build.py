@@ -19,7 +19,8 @@ T = TypeVar("T")
 def from_section(cls: type[T], section: Any, **given: Any) -> T:
     """An instance of the dataclass ``cls``: each field is ``given[name]`` when given, else
     ``section[name]`` (as a plain Python value). ``section``: a config node (``DictConfig``), its
-    schema dataclass (a section of ``OmegaConf.to_object(cfg)``) or a dict. Keys of ``section`` that ``cls`` has no field
+    schema dataclass (a section of ``OmegaConf.to_object(cfg)``) or a dict. Keys of ``section`` that
+    ``cls`` has no field
     for are ignored (one section may configure several classes).
 
     Raises ``KeyError`` naming the field and the section's keys when a field is in neither, and
@@ -44,7 +45,9 @@ def from_section(cls: type[T], section: Any, **given: Any) -> T:
         elif name in values:
             kwargs[name] = values[name]
         else:
-            raise KeyError(f"{cls.__name__}.{name} is in neither the config section (keys: "
-                           f"{sorted(values)}) nor the given values; add it to the section's "
-                           "YAML file in conf/")
+            raise KeyError(
+                f"{cls.__name__}.{name} is in neither the config section (keys: "
+                f"{sorted(values)}) nor the given values; add it to the section's "
+                "YAML file in conf/"
+            )
     return cls(**kwargs)

@@ -10,7 +10,7 @@ the "simulator knowledge" ablation row swaps in the heap's true boxes as bodies 
 
 For a candidate (the surface the descriptor finds at it, its pattern): with
 ``evaluate.check_hand_fit`` the pattern's cups must fit on that surface (:func:`pattern_fits`);
-then :func:`pipeline.controller.grasp_check.check_grasp` (IK, joint limits, no contact at the
+then :func:`pipeline.labelling.grasp_check.check_grasp` (IK, joint limits, no contact at the
 grasp pose and, with ``robot.path_check``, along the servo's predicted motion) against the bin
 and the heap model without the grasped surface. With ``evaluate.preferred_bin_clearance`` the
 check first asks for that much room from the bin on the servo's path and falls back to
@@ -30,11 +30,10 @@ import numpy as np
 import pybullet as p
 
 from pipeline.cell.bin import build_cell
-from pipeline.controller.grasp_check import GraspCheck, check_grasp
-from pipeline.controller.heap_model import (HeapCollider, HeapModel, HeapModelConfig,
-                                            LinkSurface)
+from pipeline.controller.heap_model import HeapCollider, HeapModel, HeapModelConfig, LinkSurface
 from pipeline.controller.observation import Observation
-from pipeline.labelling.hand import cup_fits
+from pipeline.grasping.hand import cup_fits
+from pipeline.labelling.grasp_check import GraspCheck, check_grasp
 from pipeline.robot.model import Contact, Robot, robot_config
 
 COLLISION_MODELS = ("observed", "truth")
@@ -51,17 +50,22 @@ class SeeingRobot(Robot):
     heap: HeapCollider | None = None
     surface: LinkSurface | None = None
 
-    def in_collision(self, q, obstacle_body_ids, ignore_body_ids=(), margin=None,
-                     self_collision=True) -> list[Contact]:
+    def in_collision(
+        self, q, obstacle_body_ids, ignore_body_ids=(), margin=None, self_collision=True
+    ) -> list[Contact]:
         ids = list(obstacle_body_ids)
         want_heap = HEAP in ids and self.heap is not None
-        found = super().in_collision(q, [b for b in ids if b != HEAP], ignore_body_ids,
-                                     margin, self_collision)
+        found = super().in_collision(
+            q, [b for b in ids if b != HEAP], ignore_body_ids, margin, self_collision
+        )
         if not want_heap:
             return found
         cid, rid = self.client, self.body_id
-        links = [k for k in self.surface.points
-                 if self.heap.may_touch(*p.getAABB(rid, k, physicsClientId=cid))]
+        links = [
+            k
+            for k in self.surface.points
+            if self.heap.may_touch(*p.getAABB(rid, k, physicsClientId=cid))
+        ]
         if links:
             states = p.getLinkStates(rid, links, physicsClientId=cid)
             for link, st in zip(links, states):
@@ -77,8 +81,7 @@ class CollisionModel(Protocol):
     def update(self, obs: Observation) -> None:
         """A new home image (the start of a plan)."""
 
-    def excluding(self, obs: Observation, uv: tuple[float, float],
-                  region: np.ndarray | None):
+    def excluding(self, obs: Observation, uv: tuple[float, float], region: np.ndarray | None):
         """A context manager giving (obstacle body ids, body ids to ignore) for a grasp at
         pixel ``uv`` of ``obs`` on the surface ``region`` ((H, W) bool or None)."""
 
@@ -101,8 +104,9 @@ class ObservedHeap:
     @contextlib.contextmanager
     def excluding(self, obs: Observation, uv, region):
         m = self.model.map
-        self.robot.heap = HeapCollider(self.model.heights_without(region), m.origin, m.cell_m,
-                                       self.margin)
+        self.robot.heap = HeapCollider(
+            self.model.heights_without(region), m.origin, m.cell_m, self.margin
+        )
         try:
             yield [HEAP], []
         finally:
@@ -115,9 +119,12 @@ class ObservedHeap:
 def heap_model_config(cfg) -> HeapModelConfig:
     """The heap model's settings, ``cfg.evaluate.heap_model``."""
     h = cfg.evaluate.heap_model
-    return HeapModelConfig(cell_m=float(h.cell_m), bin_tolerance_m=float(h.bin_tolerance_m),
-                           flying_tolerance_m=float(h.flying_tolerance_m),
-                           flying_min_neighbours=int(h.flying_min_neighbours))
+    return HeapModelConfig(
+        cell_m=float(h.cell_m),
+        bin_tolerance_m=float(h.bin_tolerance_m),
+        flying_tolerance_m=float(h.flying_tolerance_m),
+        flying_min_neighbours=int(h.flying_min_neighbours),
+    )
 
 
 def paper_x_axis(feats) -> np.ndarray:
@@ -130,7 +137,7 @@ def paper_x_axis(feats) -> np.ndarray:
 
 def pattern_fits(feats, pattern: str, hand_cfg) -> bool:
     """Whether ``pattern``'s active cups lie on the descriptor's surface ``feats``: the
-    labelling stage's hand-level rule (``pipeline.labelling.hand.cup_fits``: each cup disc
+    labelling stage's hand-level rule (``pipeline.grasping.hand.cup_fits``: each cup disc
     inside the surface rectangle, the area at least ``min_area_ratio`` × the active cups' area)
     without the labels' safety margin (a disc just inside the rectangle seals), with the hand's
     X by the paper's rule (``paper_x_axis``) and the cups on its Y, at ±``cup_offset`` for B and
@@ -138,13 +145,18 @@ def pattern_fits(feats, pattern: str, hand_cfg) -> bool:
     (``hand.rotations_deg``) leaves a single cup's fit unchanged, and B takes only 0 and 180°,
     so the paper's axis decides."""
     x_is_long = abs(feats.warped_long[0]) >= abs(feats.warped_short[0])  # as paper_x_axis
-    half_x, half_y = (feats.long_length / 2, feats.short_length / 2) if x_is_long else \
-        (feats.short_length / 2, feats.long_length / 2)
+    half_x, half_y = (
+        (feats.long_length / 2, feats.short_length / 2)
+        if x_is_long
+        else (feats.short_length / 2, feats.long_length / 2)
+    )
     cups = 2 if pattern == "B" else 1
     cup_area = math.pi * (float(hand_cfg.cup_diameter) / 2) ** 2
     discs = SimpleNamespace(cup_diameter=float(hand_cfg.cup_diameter), margin=0.0)
-    return cup_fits(half_x, half_y, float(hand_cfg.cup_offset) if cups == 2 else 0.0, discs) \
+    return (
+        cup_fits(half_x, half_y, float(hand_cfg.cup_offset) if cups == 2 else 0.0, discs)
         and feats.area >= float(hand_cfg.min_area_ratio) * cups * cup_area
+    )
 
 
 class RunTimeCheck:
@@ -160,19 +172,32 @@ class RunTimeCheck:
         self.robot = SeeingRobot(robot_config(cfg))
         self.robot.load(self.client, ground_z=-float(cfg.bin.floor_thickness))
         self.robot.set_joints(self.robot.home_q())
-        self.heap = collision_model(self.client) if collision_model is not None else \
-            ObservedHeap(self.robot, cfg.bin, heap_model_config(cfg))
+        self.heap = (
+            collision_model(self.client)
+            if collision_model is not None
+            else ObservedHeap(self.robot, cfg.bin, heap_model_config(cfg))
+        )
         pref = cfg.evaluate.preferred_bin_clearance
         # the bin clearance of the check's first pass, None: no first pass
-        self.comfort = None if pref is None or not bool(cfg.robot.path_check) \
+        self.comfort = (
+            None
+            if pref is None or not bool(cfg.robot.path_check)
             else max(float(pref), float(cfg.robot.path.bin_clearance))
+        )
 
     def update(self, obs: Observation) -> None:
         """Build the heap's collision model from a new home observation."""
         self.heap.update(obs)
 
-    def check(self, obs: Observation, feats, centre_cam: np.ndarray, pattern: str,
-              uv: tuple[float, float], hand_fit: bool) -> tuple[GraspCheck | None, str | None]:
+    def check(
+        self,
+        obs: Observation,
+        feats,
+        centre_cam: np.ndarray,
+        pattern: str,
+        uv: tuple[float, float],
+        hand_fit: bool,
+    ) -> tuple[GraspCheck | None, str | None]:
         """(the passing check, None), or (None, the reason) for a grasp with ``pattern`` whose
         active cup goes on ``centre_cam`` (home camera, metres) on the descriptor's surface
         ``feats`` at pixel ``uv`` of the home observation ``obs``: "hand_fit" with
@@ -184,10 +209,23 @@ class RunTimeCheck:
         with self.heap.excluding(obs, uv, feats.region) as (obstacles, ignore):
             obstacle_ids = list(self.bin_ids) + list(obstacles)
             for clearance in ([self.comfort] if self.comfort is not None else []) + [None]:
-                check = check_grasp(self.robot, cfg, cfg.hand, obs.T_world_cam, centre_cam,
-                                    feats.normal_cam, feats.long_axis_cam, feats.short_axis_cam,
-                                    paper_x_axis(feats), pattern, obs.intrinsics, obstacle_ids,
-                                    ignore, self.bin_ids, bin_clearance=clearance)
+                check = check_grasp(
+                    self.robot,
+                    cfg,
+                    cfg.hand,
+                    obs.T_world_cam,
+                    centre_cam,
+                    feats.normal_cam,
+                    feats.long_axis_cam,
+                    feats.short_axis_cam,
+                    paper_x_axis(feats),
+                    pattern,
+                    obs.intrinsics,
+                    obstacle_ids,
+                    ignore,
+                    self.bin_ids,
+                    bin_clearance=clearance,
+                )
                 if check.reason is None:
                     return check, None
         return None, str(check.reason)

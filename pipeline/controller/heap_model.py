@@ -114,7 +114,7 @@ def agreeing_neighbours(depth: np.ndarray, tolerance: float) -> np.ndarray:
     for dy in (-1, 0, 1):
         for dx in (-1, 0, 1):
             if dy or dx:
-                nb = pad[1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
+                nb = pad[1 + dy : 1 + dy + h, 1 + dx : 1 + dx + w]
                 count += (nb > 0) & (np.abs(nb - d) <= tolerance)
     return np.where(d > 0, count, 0)
 
@@ -123,8 +123,9 @@ def drop_flying_pixels(depth: np.ndarray, cfg: HeapModelConfig) -> np.ndarray:
     """``depth`` (H, W, m) with its flying pixels set to 0 (no depth): module docstring, step 0."""
     if float(cfg.flying_tolerance_m) <= 0:
         return depth
-    keep = agreeing_neighbours(depth, float(cfg.flying_tolerance_m)) \
-        >= int(cfg.flying_min_neighbours)
+    keep = agreeing_neighbours(depth, float(cfg.flying_tolerance_m)) >= int(
+        cfg.flying_min_neighbours
+    )
     return np.where(keep, depth, 0.0)
 
 
@@ -134,8 +135,7 @@ def world_points(obs: Observation) -> tuple[np.ndarray, np.ndarray]:
     h, w = depth.shape
     u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
     valid = np.isfinite(depth) & (depth > 0)
-    pts = backproject_pixels(np.stack([u, v], axis=-1), np.where(valid, depth, 0.0),
-                             obs.intrinsics)
+    pts = backproject_pixels(np.stack([u, v], axis=-1), np.where(valid, depth, 0.0), obs.intrinsics)
     R, t = obs.T_world_cam[:3, :3], obs.T_world_cam[:3, 3]
     return pts @ R.T + t, valid
 
@@ -176,8 +176,14 @@ def fill_unknown(heights: np.ndarray, known: np.ndarray) -> np.ndarray:
     while not known.all():
         padded = np.pad(h, 1, constant_values=-np.inf)
         ny, nx = h.shape
-        best = np.max([padded[1 + dy: 1 + dy + ny, 1 + dx: 1 + dx + nx]
-                       for dy in (-1, 0, 1) for dx in (-1, 0, 1)], axis=0)
+        best = np.max(
+            [
+                padded[1 + dy : 1 + dy + ny, 1 + dx : 1 + dx + nx]
+                for dy in (-1, 0, 1)
+                for dx in (-1, 0, 1)
+            ],
+            axis=0,
+        )
         new = ~known & np.isfinite(best)
         h = np.where(new, best, h)
         known = known | new
@@ -219,16 +225,23 @@ class HeapModel:
 class HeapCollider:
     """Which world points lie within ``margin`` of the heap's columns ``heights``."""
 
-    def __init__(self, heights: np.ndarray, origin: np.ndarray, cell_m: float,
-                 margin: float) -> None:
+    def __init__(
+        self, heights: np.ndarray, origin: np.ndarray, cell_m: float, margin: float
+    ) -> None:
         """``heights``: (ny, nx) metres above the floor; ``origin``: (2,) world (x, y) of cell
         (0, 0)'s corner; ``margin``: metres."""
         k = int(math.ceil(margin / cell_m - 1e-9))
         h = np.where(heights > 0, heights + margin, -np.inf)
         padded = np.pad(h, k, constant_values=-np.inf)
         ny, nx = h.shape
-        self.grown = np.max([padded[k + dy: k + dy + ny, k + dx: k + dx + nx]
-                             for dy in range(-k, k + 1) for dx in range(-k, k + 1)], axis=0)
+        self.grown = np.max(
+            [
+                padded[k + dy : k + dy + ny, k + dx : k + dx + nx]
+                for dy in range(-k, k + 1)
+                for dx in range(-k, k + 1)
+            ],
+            axis=0,
+        )
         self.origin, self.cell, self.k = np.asarray(origin, np.float64), float(cell_m), k
         self.top = float(self.grown.max()) if np.isfinite(self.grown).any() else -np.inf
 
@@ -245,7 +258,7 @@ class HeapCollider:
         if lo[2] >= self.top:
             return False
         rows, cols, _ = self._cells(np.array([[lo[0], lo[1]], [hi[0], hi[1]]]))
-        under = self.grown[rows[0]: rows[1] + 1, cols[0]: cols[1] + 1]
+        under = self.grown[rows[0] : rows[1] + 1, cols[0] : cols[1] + 1]
         return under.size > 0 and lo[2] < float(under.max())
 
     def hits(self, points: np.ndarray) -> bool:
@@ -265,17 +278,16 @@ class LinkSurface:
             if link == -1:
                 continue  # the fixed base stands where it stands (Robot.in_collision)
             pts = []
-            for shape in p.getCollisionShapeData(robot.body_id, link,
-                                                 physicsClientId=robot.client):
+            for shape in p.getCollisionShapeData(robot.body_id, link, physicsClientId=robot.client):
                 geom, dims, pos, orn = shape[2], shape[3], shape[5], shape[6]
-                local = _surface_points(geom, dims, spacing)
+                local = surface_points(geom, dims, spacing)
                 R = np.asarray(p.getMatrixFromQuaternion(orn)).reshape(3, 3)
                 pts.append(local @ R.T + np.asarray(pos))
             if pts:
                 self.points[link] = np.vstack(pts)
 
 
-def _surface_points(geom: int, dims, spacing: float) -> np.ndarray:
+def surface_points(geom: int, dims, spacing: float) -> np.ndarray:
     """Points (n, 3) every ``spacing`` at most on a primitive's surface, its own frame:
     ``GEOM_BOX`` (dims: full sizes) or ``GEOM_CYLINDER`` (dims: length, radius; axis z)."""
     if geom == p.GEOM_BOX:
@@ -297,5 +309,7 @@ def _surface_points(geom: int, dims, spacing: float) -> np.ndarray:
         disc = np.vstack(rings)
         caps = np.vstack([np.c_[disc, np.full(len(disc), z)] for z in (zs[0], zs[-1])])
         return np.vstack([side, caps])
-    raise ValueError(f"the heap model samples boxes and cylinders only, not pybullet geometry "
-                     f"type {geom}: give the robot's collision shapes as primitives")
+    raise ValueError(
+        f"the heap model samples boxes and cylinders only, not pybullet geometry "
+        f"type {geom}: give the robot's collision shapes as primitives"
+    )

@@ -27,7 +27,6 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Optional
 
 import numpy as np
 
@@ -43,7 +42,7 @@ def move_time(dq: np.ndarray, max_speed: float, max_accel: float) -> float:
     d = float(np.max(np.abs(dq))) if len(dq) else 0.0
     if d <= 0.0:
         return 0.0
-    if d >= max_speed ** 2 / max_accel:
+    if d >= max_speed**2 / max_accel:
         return d / max_speed + max_speed / max_accel
     return 2.0 * math.sqrt(d / max_accel)
 
@@ -90,7 +89,7 @@ class ServoStep:
     """
 
     status: str
-    q: Optional[np.ndarray] = None
+    q: np.ndarray | None = None
     clamped: bool = False
     feats: object = None
     cmd: object = None
@@ -101,16 +100,23 @@ class ServoStep:
 class Servo:
     """One attempt's visual servo (module docstring)."""
 
-    def __init__(self, cfg, kin: Kinematics, descriptor_cfg, servo_cfg, plan,
-                 perceive=None, timings: dict | None = None) -> None:
+    def __init__(
+        self,
+        cfg,
+        kin: Kinematics,
+        descriptor_cfg,
+        servo_cfg,
+        plan,
+        perceive=None,
+        timings: dict | None = None,
+    ) -> None:
         """``plan``: the ``pipeline.controller.picker.Plan`` to execute; ``perceive``: the
         depth preprocessing applied to every observation (None: none); ``timings``: lists
         ``descriptor_s`` and ``control_law_s`` (the law and the joint update) get each step's
         wall times."""
         self.cfg, self.kin, self.descriptor_cfg = cfg, kin, descriptor_cfg
         self.perceive = perceive or (lambda obs: obs)
-        self.timings = timings if timings is not None else {"descriptor_s": [],
-                                                            "control_law_s": []}
+        self.timings = timings if timings is not None else {"descriptor_s": [], "control_law_s": []}
         self.final_cfg = servo_cfg  # d*
         self.servo_cfg = servo_cfg  # the approach's first goal, then d* (step 0 sets it)
         self.plan = plan
@@ -133,9 +139,15 @@ class Servo:
         on_plane = None if self.g_world is None else world_to_camera(self.g_world[None], T)[0]
         sites = None if plan.sites_world is None else world_to_camera(plan.sites_world, T)
         t0 = time.perf_counter()
-        feats, reason = describe_surface(obs.depth_m, intr, self.seed, self.descriptor_cfg,
-                                         expected_normal_cam=expected, sites_cam=sites,
-                                         expected_point_cam=on_plane)
+        feats, reason = describe_surface(
+            obs.depth_m,
+            intr,
+            self.seed,
+            self.descriptor_cfg,
+            expected_normal_cam=expected,
+            sites_cam=sites,
+            expected_point_cam=on_plane,
+        )
         t1 = time.perf_counter()
         self.timings["descriptor_s"].append(t1 - t0)
         if feats is None:
@@ -145,8 +157,12 @@ class Servo:
             centre = T_cam_world[:3, :3] @ self.fixed_world + T_cam_world[:3, 3]
             if centre[2] <= 1e-3:
                 return ServoStep("lost", feats=feats, reason="behind_camera")
-            self.seed = np.array([intr.fx * centre[0] / centre[2] + intr.cx,
-                                  intr.fy * centre[1] / centre[2] + intr.cy])
+            self.seed = np.array(
+                [
+                    intr.fx * centre[0] / centre[2] + intr.cx,
+                    intr.fy * centre[1] / centre[2] + intr.cy,
+                ]
+            )
         else:
             centre = feats.center_cam
         self.g_world = T[:3, :3] @ np.asarray(feats.center_cam) + T[:3, 3]
@@ -155,16 +171,21 @@ class Servo:
         if self.step_index == 0:
             x_cam = ref if ref is not None else _paper_x(feats)
             self.servo_cfg, self.pregrasp_standoff = first_goal(
-                self.final_cfg, self.cfg, T, np.asarray(centre), feats.normal_cam, x_cam,
-                plan.pattern, intr)
+                self.final_cfg,
+                self.cfg,
+                T,
+                np.asarray(centre),
+                feats.normal_cam,
+                x_cam,
+                plan.pattern,
+                intr,
+            )
         self.step_index += 1
-        cmd = servo_velocity(centre, feats.normal_cam, feats.warped_long, feats.warped_short,
-                             plan.pattern, self.servo_cfg, self.kin.dt, reference_x=ref)
+        seen = (centre, feats.normal_cam, feats.warped_long, feats.warped_short, plan.pattern)
+        cmd = servo_velocity(*seen, self.servo_cfg, self.kin.dt, reference_x=ref)
         if cmd.converged and self.servo_cfg is not self.final_cfg:
             self.servo_cfg = self.final_cfg  # at the first goal (lift, pre-grasp): on to d*
-            cmd = servo_velocity(centre, feats.normal_cam, feats.warped_long,
-                                 feats.warped_short, plan.pattern, self.servo_cfg, self.kin.dt,
-                                 reference_x=ref)
+            cmd = servo_velocity(*seen, self.servo_cfg, self.kin.dt, reference_x=ref)
         g_px = np.asarray(feats.center_px, np.float64).copy()
         if cmd.converged:
             self.timings["control_law_s"].append(time.perf_counter() - t1)
@@ -174,8 +195,7 @@ class Servo:
             # The next seed is this g′, moved into the next image by the camera's own motion
             # (forward kinematics): the paper seeds with the previous g′; at 30 Hz and up to
             # 0.5 m/s the image moves tens of pixels between frames.
-            self.seed = project(self.kin.robot.camera_pose(q), self.g_world, intr,
-                                feats.center_px)
+            self.seed = project(self.kin.robot.camera_pose(q), self.g_world, intr, feats.center_px)
         self.timings["control_law_s"].append(time.perf_counter() - t1)
         return ServoStep("move", q=q, clamped=clamped, feats=feats, cmd=cmd, g_px=g_px)
 
@@ -211,8 +231,9 @@ class Mover:
         ``motion.lift_speed`` from ``q``."""
         m, dt = self.cfg.motion, self.kin.dt
         R_cam_world = self.kin.robot.camera_pose(q)[:3, :3].T
-        twist = np.concatenate([R_cam_world @ np.array([0.0, 0.0, float(m.lift_speed)]),
-                                np.zeros(3)])
+        twist = np.concatenate(
+            [R_cam_world @ np.array([0.0, 0.0, float(m.lift_speed)]), np.zeros(3)]
+        )
         steps = max(1, int(math.ceil(float(m.lift_height) / (float(m.lift_speed) * dt))))
         out = []
         for _ in range(steps):
@@ -230,8 +251,10 @@ class Mover:
             res = robot.solve_ik(T, seed_q=q_home, obstacle_ids=[])
             robot.set_joints(q_home)
             if not res.ok:
-                raise RuntimeError(f"the conveyor pose {list(T[:3, 3])} is out of the robot's "
-                                   f"reach ({res.reason}): change motion.place_position")
+                raise RuntimeError(
+                    f"the conveyor pose {list(T[:3, 3])} is out of the robot's "
+                    f"reach ({res.reason}): change motion.place_position"
+                )
             self._place_q = res.q
         return self._place_q.copy()
 
@@ -239,5 +262,8 @@ class Mover:
         """Seconds of a point-to-point move at ``motion.max_joint_speed`` and
         ``motion.max_joint_accel``."""
         m = self.cfg.motion
-        return move_time(np.asarray(q_to) - np.asarray(q_from), float(m.max_joint_speed),
-                         float(m.max_joint_accel))
+        return move_time(
+            np.asarray(q_to) - np.asarray(q_from),
+            float(m.max_joint_speed),
+            float(m.max_joint_accel),
+        )

@@ -41,9 +41,13 @@ class Observation:
     def __post_init__(self) -> None:
         d = np.asarray(self.depth_m)
         if d.ndim != 2 or d.shape != (self.intrinsics.height, self.intrinsics.width):
-            raise ValueError(f"Observation.depth_m has shape {d.shape}; the intrinsics are for "
-                             f"({self.intrinsics.height}, {self.intrinsics.width}) images: pass "
-                             "the depth image the intrinsics describe")
+            raise ValueError(
+                f"Observation.depth_m has shape {d.shape}; the intrinsics are for "
+                f"({self.intrinsics.height}, {self.intrinsics.width}) images: pass "
+                "the depth image the intrinsics describe"
+            )
         if np.asarray(self.T_world_cam).shape != (4, 4):
-            raise ValueError(f"Observation.T_world_cam must be a (4, 4) pose, got shape "
-                             f"{np.asarray(self.T_world_cam).shape}")
+            raise ValueError(
+                f"Observation.T_world_cam must be a (4, 4) pose, got shape "
+                f"{np.asarray(self.T_world_cam).shape}"
+            )

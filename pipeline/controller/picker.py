@@ -34,7 +34,6 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Optional
 
 import numpy as np
 
@@ -67,11 +66,11 @@ class Plan:
     grasp: Grasp
     pattern: str
     obs: Observation
-    point_world: Optional[np.ndarray]
-    x_world: Optional[np.ndarray] = None
-    predicted: Optional[list] = None
-    sites_world: Optional[np.ndarray] = None
-    fixed_point_world: Optional[np.ndarray] = None
+    point_world: np.ndarray | None
+    x_world: np.ndarray | None = None
+    predicted: list | None = None
+    sites_world: np.ndarray | None = None
+    fixed_point_world: np.ndarray | None = None
     planning_s: float = 0.0
 
 
@@ -82,7 +81,7 @@ class PlanResult:
     pairs ``rejected`` per reason (the check's NG reason, "descriptor" when it found no surface,
     "hand_fit", "repeat" for a retry of a failed plan), and ``planning_s``."""
 
-    plan: Optional[Plan]
+    plan: Plan | None
     candidates: list
     checked: int
     rejected: dict = field(default_factory=dict)
@@ -164,9 +163,13 @@ class RobotController:
         from pipeline.servo.descriptor import describe_surface
 
         t0 = time.perf_counter()
-        out = describe_surface(obs.depth_m, obs.intrinsics,
-                               np.array([grasp.u, grasp.v], np.float64), self.descriptor_cfg,
-                               sites_cam=sites_cam)
+        out = describe_surface(
+            obs.depth_m,
+            obs.intrinsics,
+            np.array([grasp.u, grasp.v], np.float64),
+            self.descriptor_cfg,
+            sites_cam=sites_cam,
+        )
         self.timings["descriptor_s"].append(time.perf_counter() - t0)
         return out
 
@@ -204,9 +207,11 @@ class RobotController:
         sites = [point]
         for other in grasps:
             u, v = int(round(other.u)), int(round(other.v))
-            if other is grasp or not (0 <= v < feats.region.shape[0]
-                                      and 0 <= u < feats.region.shape[1]) \
-                    or not feats.region[v, u]:
+            if (
+                other is grasp
+                or not (0 <= v < feats.region.shape[0] and 0 <= u < feats.region.shape[1])
+                or not feats.region[v, u]
+            ):
                 continue
             q = self.point_cam(obs, other)
             if q is not None and np.linalg.norm(q - point) > split_m:
@@ -225,8 +230,9 @@ class RobotController:
 
         if str(self.cfg.depth_filter.name) == "none":
             return obs
-        return dataclasses.replace(obs, depth_m=preprocess_depth(obs.depth_m,
-                                                                 self.cfg.depth_filter))
+        return dataclasses.replace(
+            obs, depth_m=preprocess_depth(obs.depth_m, self.cfg.depth_filter)
+        )
 
     # ------------------------------------------------------------------ planning
     def propose(self, obs: Observation, rng: np.random.Generator) -> list[Grasp]:
@@ -264,19 +270,26 @@ class RobotController:
                 surface = surface or self.home_surface(obs, grasp, grasps)
                 feats, sites = surface
                 if not gate:
-                    out.plan = Plan(grasp, pattern, obs, point, sites_world=sites,
-                                    fixed_point_world=fixed)
+                    out.plan = Plan(
+                        grasp, pattern, obs, point, sites_world=sites, fixed_point_world=fixed
+                    )
                     return out
                 if feats is None:
                     rejected["descriptor"] = rejected.get("descriptor", 0) + 1
                     continue
                 centre = feats.center_cam if fixed is None else self.point_cam(obs, grasp)
                 check, reason = self.checker.check(
-                    obs, feats, centre, pattern, (grasp.u, grasp.v),
-                    hand_fit=bool(ev.check_hand_fit) and grasp.pattern is not None)
+                    obs,
+                    feats,
+                    centre,
+                    pattern,
+                    (grasp.u, grasp.v),
+                    hand_fit=bool(ev.check_hand_fit) and grasp.pattern is not None,
+                )
                 if check is not None:
-                    out.plan = Plan(grasp, pattern, obs, point, check.x_world, check.path,
-                                    sites, fixed)
+                    out.plan = Plan(
+                        grasp, pattern, obs, point, check.x_world, check.path, sites, fixed
+                    )
                     return out
                 rejected[reason] = rejected.get(reason, 0) + 1
         return out
@@ -284,8 +297,15 @@ class RobotController:
     # ------------------------------------------------------------------ execution
     def servo(self, plan: Plan) -> Servo:
         """The visual servo that executes ``plan`` (``pipeline.controller.motion.Servo``)."""
-        return Servo(self.cfg, self.kin, self.descriptor_cfg, self.servo_cfg, plan,
-                     self.perceive, self.timings)
+        return Servo(
+            self.cfg,
+            self.kin,
+            self.descriptor_cfg,
+            self.servo_cfg,
+            plan,
+            self.perceive,
+            self.timings,
+        )
 
     def close(self) -> None:
         self.checker.close()

@@ -27,10 +27,11 @@ from __future__ import annotations
 import importlib
 import inspect
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
-from typing import Any, Optional, Protocol, Sequence
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -60,17 +61,16 @@ class Grasp:
 
     u: float
     v: float
-    pattern: Optional[str]
+    pattern: str | None
     score: float = 0.0
-    point_cam: Optional[np.ndarray] = None
+    point_cam: np.ndarray | None = None
     second_tier: bool = False
 
 
 class GraspPlanner(Protocol):
     """The planner interface (module docstring)."""
 
-    def plan(self, observation: Observation, rng: np.random.Generator) -> Sequence[Grasp]:
-        ...
+    def plan(self, observation: Observation, rng: np.random.Generator) -> Sequence[Grasp]: ...
 
 
 class PlannerError(ValueError):
@@ -84,30 +84,42 @@ def checked_grasps(grasps: Any, observation: Observation, name: str) -> list[Gra
     :class:`PlannerError` naming the planner ``name``, the offending item and the fix."""
     fix = "return a list of pipeline.controller.planning.Grasp, best first ([] for no grasp)"
     if grasps is None or isinstance(grasps, (str, bytes, dict)) or not hasattr(grasps, "__len__"):
-        raise PlannerError(f"planner {name!r}: plan() returned {type(grasps).__name__}, not a "
-                           f"sequence of Grasp: {fix}")
+        raise PlannerError(
+            f"planner {name!r}: plan() returned {type(grasps).__name__}, not a "
+            f"sequence of Grasp: {fix}"
+        )
     out = list(grasps)
     h, w = observation.intrinsics.height, observation.intrinsics.width
     for i, g in enumerate(out):
         if not isinstance(g, Grasp):
-            raise PlannerError(f"planner {name!r}: item {i} of plan()'s answer is a "
-                               f"{type(g).__name__}, not a Grasp: {fix}")
+            raise PlannerError(
+                f"planner {name!r}: item {i} of plan()'s answer is a "
+                f"{type(g).__name__}, not a Grasp: {fix}"
+            )
         if not (math.isfinite(float(g.u)) and math.isfinite(float(g.v))):
-            raise PlannerError(f"planner {name!r}: grasp {i} has a non-finite pixel "
-                               f"({g.u}, {g.v}): give the grasp point in pixels of the image")
+            raise PlannerError(
+                f"planner {name!r}: grasp {i} has a non-finite pixel "
+                f"({g.u}, {g.v}): give the grasp point in pixels of the image"
+            )
         if not (-0.5 <= float(g.u) < w - 0.5 and -0.5 <= float(g.v) < h - 0.5):
-            raise PlannerError(f"planner {name!r}: grasp {i} at pixel ({g.u:.1f}, {g.v:.1f}) "
-                               f"lies outside the {w} x {h} image: u must be in [0, {w - 1}] "
-                               f"and v in [0, {h - 1}]")
+            raise PlannerError(
+                f"planner {name!r}: grasp {i} at pixel ({g.u:.1f}, {g.v:.1f}) "
+                f"lies outside the {w} x {h} image: u must be in [0, {w - 1}] "
+                f"and v in [0, {h - 1}]"
+            )
         if g.pattern is not None and g.pattern not in PATTERNS:
-            raise PlannerError(f"planner {name!r}: grasp {i} has pattern {g.pattern!r}: use "
-                               f"one of {PATTERNS}, or None for a single suction point")
+            raise PlannerError(
+                f"planner {name!r}: grasp {i} has pattern {g.pattern!r}: use "
+                f"one of {PATTERNS}, or None for a single suction point"
+            )
         if g.point_cam is not None:
             pt = np.asarray(g.point_cam, np.float64)
             if pt.shape != (3,) or not np.all(np.isfinite(pt)) or pt[2] <= 0:
-                raise PlannerError(f"planner {name!r}: grasp {i} has point_cam {g.point_cam!r}:"
-                                   " give three finite numbers (camera frame, metres, z > 0) "
-                                   "or None")
+                raise PlannerError(
+                    f"planner {name!r}: grasp {i} has point_cam {g.point_cam!r}:"
+                    " give three finite numbers (camera frame, metres, z > 0) "
+                    "or None"
+                )
     return out
 
 
@@ -123,15 +135,25 @@ class DCNNPlanner:
         self.net = Planner.load(train_dir, device="cpu")
         th = cfg.evaluate.dcnn_threshold
         # the composed train.ranking (policy included), with the model's th unless overridden
-        self.net.ranking = ranking_config(cfg, self.net.ranking.threshold if th is None
-                                          else float(th))
+        self.net.ranking = ranking_config(
+            cfg, self.net.ranking.threshold if th is None else float(th)
+        )
         self.floor = fallback_threshold(cfg, self.net.ranking.threshold)  # the second tier's
 
     def plan(self, observation: Observation, rng: np.random.Generator) -> list[Grasp]:
-        cands = self.net.plan(observation.depth_m, observation.intrinsics,
-                              fallback_threshold=self.floor)
-        return [Grasp(u=float(c.u), v=float(c.v), pattern=c.grasp_class.name,
-                      score=float(c.score), second_tier=bool(c.second_tier)) for c in cands]
+        cands = self.net.plan(
+            observation.depth_m, observation.intrinsics, fallback_threshold=self.floor
+        )
+        return [
+            Grasp(
+                u=float(c.u),
+                v=float(c.v),
+                pattern=c.grasp_class.name,
+                score=float(c.score),
+                second_tier=bool(c.second_tier),
+            )
+            for c in cands
+        ]
 
 
 class DexNetStylePlanner:
@@ -140,19 +162,30 @@ class DexNetStylePlanner:
     final set by quality (at most ``evaluate.max_candidates_checked``); single suction points
     (pattern None)."""
 
-    def __init__(self, cfg, variant: str, T_home: np.ndarray,
-                 baseline_dir: Path | str | None) -> None:
+    def __init__(
+        self, cfg, variant: str, T_home: np.ndarray, baseline_dir: Path | str | None
+    ) -> None:
         from pipeline.dexnet.planner import DexNetPlanner
 
         self.dex = DexNetPlanner.for_variant(cfg, variant, T_home, baseline_dir)
-        self.k = int(cfg.evaluate.max_candidates_checked) \
-            if bool(cfg.evaluate.check_reachability) else 1
+        self.k = (
+            int(cfg.evaluate.max_candidates_checked) if bool(cfg.evaluate.check_reachability) else 1
+        )
 
     def plan(self, observation: Observation, rng: np.random.Generator) -> list[Grasp]:
-        grasps = self.dex.plan(observation.depth_m, observation.intrinsics, rng=rng,
-                               max_grasps=self.k)
-        return [Grasp(u=float(g.u), v=float(g.v), pattern=None, score=float(g.score),
-                      point_cam=np.asarray(g.point_cam, np.float64)) for g in grasps]
+        grasps = self.dex.plan(
+            observation.depth_m, observation.intrinsics, rng=rng, max_grasps=self.k
+        )
+        return [
+            Grasp(
+                u=float(g.u),
+                v=float(g.v),
+                pattern=None,
+                score=float(g.score),
+                point_cam=np.asarray(g.point_cam, np.float64),
+            )
+            for g in grasps
+        ]
 
 
 # ------------------------------------------------------------------------------ plug-ins
@@ -168,7 +201,8 @@ def plugin_target(name: str) -> str:
         raise PlannerError(
             f"unknown planner {name!r}: evaluate.planners takes {', '.join(BUILT_IN)}, a "
             f"plug-in as package.module:Class, or an entry point of the group "
-            f"{ENTRY_POINT_GROUP!r} (installed: {', '.join(known) or 'none'})")
+            f"{ENTRY_POINT_GROUP!r} (installed: {', '.join(known) or 'none'})"
+        )
     return found[0].value
 
 
@@ -179,37 +213,48 @@ def load_plugin(name: str, cfg) -> GraspPlanner:
     target = plugin_target(name)
     module_name, _, attr = target.partition(":")
     if not module_name or not attr:
-        raise PlannerError(f"planner {name!r}: write a plug-in as package.module:Class, got "
-                           f"{target!r}")
+        raise PlannerError(
+            f"planner {name!r}: write a plug-in as package.module:Class, got {target!r}"
+        )
     try:
         module = importlib.import_module(module_name)
     except Exception as exc:  # ImportError, or the module's own error while importing
-        raise PlannerError(f"planner {name!r}: cannot import module {module_name!r} "
-                           f"({type(exc).__name__}: {exc}); run from the folder that holds it "
-                           "or install its package into .venv") from exc
+        raise PlannerError(
+            f"planner {name!r}: cannot import module {module_name!r} "
+            f"({type(exc).__name__}: {exc}); run from the folder that holds it "
+            "or install its package into .venv"
+        ) from exc
     factory = module
     for part in attr.split("."):
         if not hasattr(factory, part):
-            raise PlannerError(f"planner {name!r}: module {module_name!r} has no {attr!r}; "
-                               "name the planner class after the ':'")
+            raise PlannerError(
+                f"planner {name!r}: module {module_name!r} has no {attr!r}; "
+                "name the planner class after the ':'"
+            )
         factory = getattr(factory, part)
     if not callable(factory):
-        raise PlannerError(f"planner {name!r}: {target} is a {type(factory).__name__}, not a "
-                           "class: name the planner class after the ':'")
+        raise PlannerError(
+            f"planner {name!r}: {target} is a {type(factory).__name__}, not a "
+            "class: name the planner class after the ':'"
+        )
     try:
         planner = factory(cfg)
     except Exception as exc:
-        raise PlannerError(f"planner {name!r}: {target}(cfg) failed ({type(exc).__name__}: "
-                           f"{exc}); its class is called with the composed configuration")\
-            from exc
+        raise PlannerError(
+            f"planner {name!r}: {target}(cfg) failed ({type(exc).__name__}: "
+            f"{exc}); its class is called with the composed configuration"
+        ) from exc
     method = getattr(planner, "plan", None)
     if not callable(method):
-        raise PlannerError(f"planner {name!r}: {target} has no plan() method; give it "
-                           "plan(self, observation, rng) returning a list of Grasp")
+        raise PlannerError(
+            f"planner {name!r}: {target} has no plan() method; give it "
+            "plan(self, observation, rng) returning a list of Grasp"
+        )
     try:
         inspect.signature(method).bind(None, None)
     except TypeError:
-        raise PlannerError(f"planner {name!r}: {target}.plan{inspect.signature(method)} does "
-                           "not take (observation, rng); give it plan(self, observation, rng)"
-                           ) from None
+        raise PlannerError(
+            f"planner {name!r}: {target}.plan{inspect.signature(method)} does "
+            "not take (observation, rng); give it plan(self, observation, rng)"
+        ) from None
     return planner

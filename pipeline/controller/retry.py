@@ -76,8 +76,9 @@ class RetryMemory:
         """``ev``: the ``evaluate`` section."""
         self.policy = str(ev.retry_policy)
         if self.policy not in RETRY_POLICIES:
-            raise ValueError(f"evaluate.retry_policy is {self.policy!r}: choose from "
-                             f"{RETRY_POLICIES}")
+            raise ValueError(
+                f"evaluate.retry_policy is {self.policy!r}: choose from {RETRY_POLICIES}"
+            )
         self.same_point_m = float(ev.retry_same_point_m)
         self.radius_m = float(ev.retry_neighbour_m)
         self.depth_change_m = float(ev.retry_depth_change_m)
@@ -91,12 +92,19 @@ class RetryMemory:
     def clear(self) -> None:
         self.failed = []
 
-    def remember(self, plan_obs: Observation, point_world: np.ndarray, pattern: str,
-                 outcome: str) -> None:
+    def remember(
+        self, plan_obs: Observation, point_world: np.ndarray, pattern: str, outcome: str
+    ) -> None:
         """A failed attempt planned on ``plan_obs`` at ``point_world`` with ``pattern``."""
-        self.failed.append(FailedPlan(np.asarray(point_world, np.float64), pattern, outcome,
-                                      smoothed(plan_obs.depth_m),
-                                      np.asarray(plan_obs.T_world_cam, np.float64)))
+        self.failed.append(
+            FailedPlan(
+                np.asarray(point_world, np.float64),
+                pattern,
+                outcome,
+                smoothed(plan_obs.depth_m),
+                np.asarray(plan_obs.T_world_cam, np.float64),
+            )
+        )
 
     def _smoothed_now(self, obs: Observation) -> np.ndarray:
         if self._now is None or self._now[0] != id(obs):
@@ -116,8 +124,9 @@ class RetryMemory:
         both = (now > 0) & (then > 0) & near
         changed = both & (np.abs(now - then) > self.depth_change_m)
         # a change thinner than 3 pixels is a sensor's flicker at depth steps, not a moved box
-        changed = cv2.morphologyEx(changed.astype(np.uint8), cv2.MORPH_OPEN,
-                                   np.ones((3, 3), np.uint8)).astype(bool)
+        changed = cv2.morphologyEx(
+            changed.astype(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8)
+        ).astype(bool)
         intr = obs.intrinsics
         return float(np.sum(now[changed].astype(np.float64) ** 2) / (intr.fx * intr.fy))
 
@@ -129,11 +138,19 @@ class RetryMemory:
         for f in self.failed:
             if np.linalg.norm(point_world - f.point) > self.same_point_m:
                 continue
-            if self.drop_single_cup and f.outcome == "dropped" and f.pattern != "B" \
-                    and pattern != "B":
+            if (
+                self.drop_single_cup
+                and f.outcome == "dropped"
+                and f.pattern != "B"
+                and pattern != "B"
+            ):
                 return True  # one cup did not hold this box: the heap's changes do not matter
-            if self.no_seal_two_cups and f.outcome == "no_seal" and f.pattern == "B" \
-                    and pattern == "B":
+            if (
+                self.no_seal_two_cups
+                and f.outcome == "no_seal"
+                and f.pattern == "B"
+                and pattern == "B"
+            ):
                 return True  # two cups found no seal on this surface: it has not grown
             same_plan = f.pattern == pattern or f.outcome in self.point_outcomes
             if same_plan and self.changed_area(f, obs) < self.area_m2:

@@ -17,5 +17,6 @@ def pixels_to_points(scene, uv: np.ndarray) -> np.ndarray:
     v = np.clip(np.round(uv[:, 1]).astype(int), 0, h - 1)
     z = scene.depth_clean_m[v, u].astype(np.float64)
     k = scene.intrinsics
-    return np.stack([(uv[:, 0] - k.cx) / k.fx * z, (uv[:, 1] - k.cy) / k.fy * z, z],
-                    axis=1).astype(np.float32)
+    return np.stack([(uv[:, 0] - k.cx) / k.fx * z, (uv[:, 1] - k.cy) / k.fy * z, z], axis=1).astype(
+        np.float32
+    )

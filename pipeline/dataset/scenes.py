@@ -36,8 +36,8 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
-from types import SimpleNamespace
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -137,23 +137,32 @@ class SceneDataset:
 
     def __getitem__(self, i: int) -> Scene:
         if not -self._len <= i < self._len:
-            raise IndexError(f"scene {i} out of range for split {self.split!r} of {self._len} scenes")
+            raise IndexError(
+                f"scene {i} out of range for split {self.split!r} of {self._len} scenes"
+            )
         i %= self._len
         k = int(np.searchsorted(self._starts, i, side="right") - 1)
         arrays, box_start = self._shard(k)
         row = i - int(self._starts[k])
         b0, b1 = int(box_start[row]), int(box_start[row + 1])
         boxes = [
-            Box(instance=j + 1, type_index=int(arrays["box_type"][b]),
+            Box(
+                instance=j + 1,
+                type_index=int(arrays["box_type"][b]),
                 type_name=self.box_types[int(arrays["box_type"][b])]["name"],
-                size=arrays["box_size"][b], T_world_box=arrays["box_T_world"][b],
+                size=arrays["box_size"][b],
+                T_world_box=arrays["box_T_world"][b],
                 T_cam_box=arrays["box_T_cam"][b],
-                mass=float(arrays["box_mass"][b]) if "box_mass" in arrays else None)
+                mass=float(arrays["box_mass"][b]) if "box_mass" in arrays else None,
+            )
             for j, b in enumerate(range(b0, b1))
         ]
         depth = arrays["depth"][row].astype(np.float32) * np.float32(self.depth_unit)
-        clean = (arrays["depth_clean"][row].astype(np.float32) * np.float32(self.depth_unit)
-                 if "depth_clean" in arrays else depth)
+        clean = (
+            arrays["depth_clean"][row].astype(np.float32) * np.float32(self.depth_unit)
+            if "depth_clean" in arrays
+            else depth
+        )
         return Scene(
             depth_m=depth,
             depth_clean_m=clean,

@@ -10,15 +10,19 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.mixture import GaussianMixture
 
 from pipeline.dexnet.sampling import (
-    Candidates, PointCloudImage, SamplerConfig, candidates_at, sample_candidates,
+    Candidates,
+    PointCloudImage,
+    SamplerConfig,
+    candidates_at,
+    sample_candidates,
 )
 
 
@@ -89,9 +93,59 @@ def _score(score_fn: Callable[[Candidates], np.ndarray], cands: Candidates) -> n
     return np.where(np.isnan(s), -np.inf, s)
 
 
-def cross_entropy_method(cloud: PointCloudImage, score_fn: Callable[[Candidates], np.ndarray],
-                         cfg: CEMConfig, sampler_cfg: SamplerConfig,
-                         rng: np.random.Generator | None = None) -> CEMResult:
+def _refit_and_sample(
+    cloud: PointCloudImage,
+    elite_uv: np.ndarray,
+    n_elite: int,
+    cfg: CEMConfig,
+    sampler_cfg: SamplerConfig,
+    rng: np.random.Generator,
+) -> list[Candidates]:
+    """Step 2 of :func:`cross_entropy_method` after the elites: fit the mixture to the elites'
+    standardised pixels (N, 2) and draw acceptable candidates until ``num_gmm_samples`` are
+    collected or ``max_resamples`` rounds pass; the collected parts (none: nothing accepted)."""
+    elite_uv = elite_uv.astype(np.float64)
+    mean = elite_uv.mean(axis=0)
+    std = elite_uv.std(axis=0)
+    std[std < 1e-6] = 1e-6
+    x = (elite_uv - mean) / std
+    if len(x) < 2:  # GaussianMixture needs >= 2 samples; a repeat changes nothing
+        x = np.repeat(x, 2, axis=0)
+    n_comp = min(max(math.ceil(cfg.gmm_component_frac * n_elite), 1), n_elite)
+    state = np.random.RandomState(int(rng.integers(0, 2**31 - 1)))
+    gmm = GaussianMixture(
+        n_components=n_comp,
+        reg_covar=cfg.gmm_reg_covar,
+        weights_init=np.full(n_comp, 1.0 / n_comp),
+        random_state=state,
+    )
+    parts: list[Candidates] = []
+    collected = 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        gmm.fit(x)
+        for _r in range(max(cfg.max_resamples, 1)):
+            draws, _ = gmm.sample(n_samples=cfg.num_gmm_samples)
+            draws = draws[state.permutation(len(draws))]
+            uv = np.rint(draws * std + mean)
+            new, _ok = candidates_at(cloud, uv, sampler_cfg)
+            need = cfg.num_gmm_samples - collected
+            if len(new):
+                new = new.take(np.arange(min(need, len(new))))
+                parts.append(new)
+                collected += len(new)
+            if collected >= cfg.num_gmm_samples:
+                break
+    return parts
+
+
+def cross_entropy_method(
+    cloud: PointCloudImage,
+    score_fn: Callable[[Candidates], np.ndarray],
+    cfg: CEMConfig,
+    sampler_cfg: SamplerConfig,
+    rng: np.random.Generator | None = None,
+) -> CEMResult:
     """Pick the best suction candidate with gqcnn's cross-entropy method.
 
     1. Draw ``num_seed_samples`` candidates with :func:`sample_candidates`.
@@ -137,8 +191,7 @@ def cross_entropy_method(cloud: PointCloudImage, score_fn: Callable[[Candidates]
 
     cands = sample_candidates(cloud, cfg.num_seed_samples, rng, sampler_cfg)
     if len(cands) == 0:
-        return CEMResult(best=Candidates.empty(), best_score=-math.inf, iterations=[],
-                         num_scored=0)
+        return CEMResult(best=Candidates.empty(), best_score=-math.inf, iterations=[], num_scored=0)
 
     iterations: list[CEMIteration] = []
     num_scored = 0
@@ -152,35 +205,8 @@ def cross_entropy_method(cloud: PointCloudImage, score_fn: Callable[[Candidates]
         it = CEMIteration(candidates=cands, scores=scores, elite_idx=elite_idx)
         iterations.append(it)
 
-        elite_uv = cands.uv[elite_idx].astype(np.float64)
-        mean = elite_uv.mean(axis=0)
-        std = elite_uv.std(axis=0)
-        std[std < 1e-6] = 1e-6
-        x = (elite_uv - mean) / std
-        if len(x) < 2:              # GaussianMixture needs >= 2 samples; a repeat changes nothing
-            x = np.repeat(x, 2, axis=0)
-        n_comp = min(max(math.ceil(cfg.gmm_component_frac * n_elite), 1), n_elite)
-        state = np.random.RandomState(int(rng.integers(0, 2**31 - 1)))
-        gmm = GaussianMixture(n_components=n_comp, reg_covar=cfg.gmm_reg_covar,
-                              weights_init=np.full(n_comp, 1.0 / n_comp), random_state=state)
-        parts: list[Candidates] = []
-        collected = 0
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", ConvergenceWarning)
-            gmm.fit(x)
-            for _r in range(max(cfg.max_resamples, 1)):
-                draws, _ = gmm.sample(n_samples=cfg.num_gmm_samples)
-                draws = draws[state.permutation(len(draws))]
-                uv = np.rint(draws * std + mean)
-                new, _ok = candidates_at(cloud, uv, sampler_cfg)
-                need = cfg.num_gmm_samples - collected
-                if len(new):
-                    new = new.take(np.arange(min(need, len(new))))
-                    parts.append(new)
-                    collected += len(new)
-                if collected >= cfg.num_gmm_samples:
-                    break
-        if collected == 0:
+        parts = _refit_and_sample(cloud, cands.uv[elite_idx], n_elite, cfg, sampler_cfg, rng)
+        if not parts:
             final = it
             break
         cands = Candidates.concat(parts)
@@ -189,10 +215,15 @@ def cross_entropy_method(cloud: PointCloudImage, score_fn: Callable[[Candidates]
         scores = _score(score_fn, cands)
         num_scored += len(cands)
         best_i = int(np.argmax(scores))
-        final = CEMIteration(candidates=cands, scores=scores,
-                             elite_idx=np.array([best_i], np.int64))
+        final = CEMIteration(
+            candidates=cands, scores=scores, elite_idx=np.array([best_i], np.int64)
+        )
         iterations.append(final)
     else:
         best_i = int(np.argmax(final.scores))
-    return CEMResult(best=final.candidates.take([best_i]), best_score=float(final.scores[best_i]),
-                     iterations=iterations, num_scored=num_scored)
+    return CEMResult(
+        best=final.candidates.take([best_i]),
+        best_score=float(final.scores[best_i]),
+        iterations=iterations,
+        num_scored=num_scored,
+    )

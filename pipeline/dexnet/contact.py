@@ -10,7 +10,7 @@ Frames and units: camera frame (OpenCV: x right, y down, z forward), metres, new
 (u, v) with (0, 0) the centre of the top-left pixel (``pipeline.camera.geometry``). Boxes have
 ``size`` (3,) edge lengths along their own x, y, z and ``T_cam_box`` (4, 4), the pose of the
 box centre in the camera frame; the mask value of ``boxes[k-1]`` is k. Faces are numbered in the
-order of ``pipeline.labelling.surfaces.FACES``: +x, -x, +y, -y, +z, -z (outward box-frame normal).
+order of ``pipeline.grasping.surfaces.FACES``: +x, -x, +y, -y, +z, -z (outward box-frame normal).
 
 Line casting: a point's line starts ``START_OFFSET`` = 0.05 m back along the approach axis a
 (``x - 0.05 a``) and runs forward (+a). It is intersected with a box by the slab method in the
@@ -65,11 +65,20 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.camera.geometry import Intrinsics
-from pipeline.config.build import from_section
+from pipeline.grasping.suction import SuctionModelConfig, box_mass
 
 # Reason codes of ContactResult.reason: REASONS[code] is its name.
-REASONS = ("ok", "not_on_box", "off_face", "uneven", "occluded", "pull", "shear", "torsion",
-           "bending")
+REASONS = (
+    "ok",
+    "not_on_box",
+    "off_face",
+    "uneven",
+    "occluded",
+    "pull",
+    "shear",
+    "torsion",
+    "bending",
+)
 
 # The columns of a labelled suction candidate (the baseline's candidate shards, in-domain and out
 # of domain; a scene index column precedes them):
@@ -77,68 +86,14 @@ LABELLED_CANDIDATE_FIELDS = {
     "uv": "(M, 2) int64 pixel (u, v)",
     "point": "(M, 3) float64 contact point, camera frame, m",
     "axis": "(M, 3) float64 approach axis (into the object), camera frame",
-    "depth": "(M,) float64 m", "angle": "(M,) float64 rad from the optical axis",
+    "depth": "(M,) float64 m",
+    "angle": "(M,) float64 rad from the optical axis",
     "quality": "(M,) float64 robust quality in [0, 1]",
     "label": "(M,) bool quality >= suction.quality_threshold",
     "reason": "(M,) int8 unperturbed contact outcome, index into reasons",
 }
 # Lines are cast from this far back along the approach axis, metres.
 START_OFFSET = 0.05
-
-
-@dataclass
-class SuctionModelConfig:
-    """Settings of the suction contact model (SI units: metres, newtons, kilograms, seconds):
-    ``conf/suction/`` with the cup radius, g and the box density given by the caller, built by
-    :func:`suction_model_config`.
-
-    Attributes:
-        cup_radius: radius of the cup's rim, m (the paper's cup: 18 mm diameter).
-        vacuum_force: force with which the vacuum pulls the object onto one cup, N
-            (50 kPa x cup area).
-        friction: friction coefficient mu between cup and box.
-        compliance: largest spread of the rim's contact heights along the approach axis that
-            still seals, m.
-        ring_points: K, points on the cup's rim.
-        visibility_tolerance: a rim point counts as free when the depth image at its pixel is
-            within this of its z, m.
-        gravity: g, m/s^2.
-        density: box density, kg/m^3; mass = density x volume, centre of mass = box centre.
-        perturbations: perturbed grasps per candidate in ``robust_quality``.
-        sigma_position: standard deviation of each in-plane component of the contact point's
-            shift, m.
-        sigma_axis_deg: standard deviation of the approach axis tilt, degrees.
-        quality_threshold: a robust quality at or above this is a positive label (Dex-Net 4.0).
-    """
-
-    cup_radius: float
-    vacuum_force: float
-    friction: float
-    compliance: float
-    ring_points: int
-    visibility_tolerance: float
-    gravity: float
-    density: float
-    perturbations: int
-    sigma_position: float
-    sigma_axis_deg: float
-    quality_threshold: float
-
-
-def box_mass(box, density: float) -> float:
-    """A box's mass, kg: its own ``mass`` where it has one (cartons drawn per box), else
-    ``density`` (kg/m³) × the volume of its ``size`` (3,) m."""
-    mass = getattr(box, "mass", None)
-    return float(mass) if mass is not None else float(density) * float(np.prod(box.size))
-
-
-def suction_model_config(cfg, density: float) -> SuctionModelConfig:
-    """The suction contact model of a composed config: ``conf/suction/`` with the cup radius
-    (``hand.cup_diameter`` / 2), g (``|physics.gravity|``) and the boxes' ``density`` (kg/m³:
-    ``boxes.density`` for generated heaps, ``eval_boxes.density`` for the closed loop's boxes)."""
-    return from_section(SuctionModelConfig, cfg.suction,
-                        cup_radius=float(cfg.hand.cup_diameter) / 2.0,
-                        gravity=abs(float(cfg.physics.gravity)), density=float(density))
 
 
 @dataclass
@@ -160,8 +115,7 @@ class ContactResult:
     instance: np.ndarray
 
 
-def _slab(origins: np.ndarray, dirs: np.ndarray,
-          half: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _slab(origins: np.ndarray, dirs: np.ndarray, half: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Lines ``origins + s dirs`` (s >= 0) against boxes centred at the origin, in the box frame.
 
     Args:
@@ -202,16 +156,23 @@ def perpendicular_basis(axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def unit_rows(x: np.ndarray, name: str) -> np.ndarray:
-    """``x`` (..., 3) with each row scaled to unit length; ValueError naming ``name`` for a zero row."""
+    """``x`` (..., 3) with each row scaled to unit length; ValueError naming ``name`` for a zero
+    row."""
     norm = np.linalg.norm(x, axis=-1, keepdims=True)
     if np.any(norm < 1e-9):
         raise ValueError(f"{name} has a zero-length vector")
     return x / norm
 
 
-def checked_inputs(points_cam, axes_cam, depth_m: np.ndarray, mask: np.ndarray,
-                   intrinsics: Intrinsics, gravity_cam, cfg: SuctionModelConfig
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def checked_inputs(
+    points_cam,
+    axes_cam,
+    depth_m: np.ndarray,
+    mask: np.ndarray,
+    intrinsics: Intrinsics,
+    gravity_cam,
+    cfg: SuctionModelConfig,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The contact models' inputs checked: (points (N, 3), unit axes (N, 3), unit gravity (3,)),
     camera frame. Raises ``ValueError`` for unequal point and axis counts, a depth image or mask
     that is not the intrinsics' (H, W), fewer than 3 rim points, or a zero axis or gravity."""
@@ -221,8 +182,10 @@ def checked_inputs(points_cam, axes_cam, depth_m: np.ndarray, mask: np.ndarray,
         raise ValueError(f"{len(p)} points but {len(a)} axes")
     shape = (intrinsics.height, intrinsics.width)
     if depth_m.shape != shape or mask.shape != shape:
-        raise ValueError(f"depth {depth_m.shape} and mask {mask.shape} must both be (H, W) = "
-                         f"{shape}, the camera intrinsics' image size")
+        raise ValueError(
+            f"depth {depth_m.shape} and mask {mask.shape} must both be (H, W) = "
+            f"{shape}, the camera intrinsics' image size"
+        )
     if cfg.ring_points < 3:
         raise ValueError(f"ring_points must be >= 3, not {cfg.ring_points}")
     g_dir = unit_rows(np.asarray(gravity_cam, dtype=np.float64).reshape(3), "gravity_cam")
@@ -231,9 +194,12 @@ def checked_inputs(points_cam, axes_cam, depth_m: np.ndarray, mask: np.ndarray,
 
 def empty_result(n: int) -> ContactResult:
     """N candidates on nothing: no seal, no wrench, reason "not_on_box", instance 0."""
-    return ContactResult(np.zeros(n, dtype=bool), np.zeros(n, dtype=bool),
-                         np.full(n, REASONS.index("not_on_box"), dtype=np.int8),
-                         np.zeros(n, dtype=np.int64))
+    return ContactResult(
+        np.zeros(n, dtype=bool),
+        np.zeros(n, dtype=bool),
+        np.full(n, REASONS.index("not_on_box"), dtype=np.int8),
+        np.zeros(n, dtype=np.int64),
+    )
 
 
 def rim_ring(axes: np.ndarray, cfg: SuctionModelConfig) -> np.ndarray:
@@ -242,13 +208,20 @@ def rim_ring(axes: np.ndarray, cfg: SuctionModelConfig) -> np.ndarray:
     from the first ``perpendicular_basis`` vector."""
     e1, e2 = perpendicular_basis(axes)
     angles = 2.0 * np.pi * np.arange(cfg.ring_points) / cfg.ring_points
-    return cfg.cup_radius * (np.cos(angles)[None, :, None] * e1[:, None, :]
-                             + np.sin(angles)[None, :, None] * e2[:, None, :])
+    return cfg.cup_radius * (
+        np.cos(angles)[None, :, None] * e1[:, None, :]
+        + np.sin(angles)[None, :, None] * e2[:, None, :]
+    )
 
 
-def occluded_contacts(points: np.ndarray, instance: np.ndarray, depth_m: np.ndarray,
-                      mask: np.ndarray, intrinsics: Intrinsics,
-                      cfg: SuctionModelConfig) -> np.ndarray:
+def occluded_contacts(
+    points: np.ndarray,
+    instance: np.ndarray,
+    depth_m: np.ndarray,
+    mask: np.ndarray,
+    intrinsics: Intrinsics,
+    cfg: SuctionModelConfig,
+) -> np.ndarray:
     """Rule 3: (M,) whether any of each candidate's contact points (M, P, 3) (rim hits and the
     centre's, camera frame) is not what the camera sees there: outside the image or behind it,
     another instance in ``mask`` than ``instance`` (M,), or a depth more than
@@ -261,13 +234,22 @@ def occluded_contacts(points: np.ndarray, instance: np.ndarray, depth_m: np.ndar
     inside = in_front & (u >= 0) & (u < intrinsics.width) & (v >= 0) & (v < intrinsics.height)
     ui = np.where(inside, u, 0).astype(np.intp)
     vi = np.where(inside, v, 0).astype(np.intp)
-    seen = (inside & (mask[vi, ui] == instance[:, None])
-            & (np.abs(depth_m[vi, ui] - z) <= cfg.visibility_tolerance))
+    seen = (
+        inside
+        & (mask[vi, ui] == instance[:, None])
+        & (np.abs(depth_m[vi, ui] - z) <= cfg.visibility_tolerance)
+    )
     return ~np.all(seen, axis=1)
 
 
-def wrench_failures(mass: np.ndarray, com: np.ndarray, contact: np.ndarray, axes: np.ndarray,
-                    g_dir: np.ndarray, cfg: SuctionModelConfig) -> list[np.ndarray]:
+def wrench_failures(
+    mass: np.ndarray,
+    com: np.ndarray,
+    contact: np.ndarray,
+    axes: np.ndarray,
+    g_dir: np.ndarray,
+    cfg: SuctionModelConfig,
+) -> list[np.ndarray]:
     """Rule 4: the object's weight against the soft contact's wrench limits, per candidate.
     ``mass`` (M,) kg, ``com`` and ``contact`` (M, 3) and ``axes`` (M, 3) unit, ``g_dir`` (3,)
     unit, one frame. Returns the (M,) failures [pull, shear, torsion, bending]."""
@@ -282,9 +264,15 @@ def wrench_failures(mass: np.ndarray, com: np.ndarray, contact: np.ndarray, axes
     return [f_n < 0.0, shear > mu * f_n, np.abs(tau_axial) > r * mu * f_n, bend > r * f_n]
 
 
-def record_rules(out: ContactResult, on: np.ndarray, instance: np.ndarray, off_face: np.ndarray,
-                 uneven: np.ndarray, occluded: np.ndarray, wrench: list[np.ndarray]
-                 ) -> ContactResult:
+def record_rules(
+    out: ContactResult,
+    on: np.ndarray,
+    instance: np.ndarray,
+    off_face: np.ndarray,
+    uneven: np.ndarray,
+    occluded: np.ndarray,
+    wrench: list[np.ndarray],
+) -> ContactResult:
     """Write the candidates ``on``'s rule outcomes into ``out``: the first failed rule is the
     reason (off_face, uneven, occluded, then pull, shear, torsion, bending), a seal is no
     rule-2/3 failure, wrench_ok a seal and no rule-4 failure."""
@@ -298,9 +286,16 @@ def record_rules(out: ContactResult, on: np.ndarray, instance: np.ndarray, off_f
     return out
 
 
-def evaluate_contacts(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m: np.ndarray,
-                      mask: np.ndarray, intrinsics: Intrinsics, boxes: Sequence,
-                      gravity_cam: np.ndarray, cfg: SuctionModelConfig) -> ContactResult:
+def evaluate_contacts(
+    points_cam: np.ndarray,
+    axes_cam: np.ndarray,
+    depth_m: np.ndarray,
+    mask: np.ndarray,
+    intrinsics: Intrinsics,
+    boxes: Sequence,
+    gravity_cam: np.ndarray,
+    cfg: SuctionModelConfig,
+) -> ContactResult:
     """Seal and wrench resistance of N suction grasps, by the rules of the module docstring.
 
     Args:
@@ -319,8 +314,7 @@ def evaluate_contacts(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m: np.
     Returns:
         A ContactResult of (N,) arrays.
     """
-    p, a, g_dir = checked_inputs(points_cam, axes_cam, depth_m, mask, intrinsics, gravity_cam,
-                                 cfg)
+    p, a, g_dir = checked_inputs(points_cam, axes_cam, depth_m, mask, intrinsics, gravity_cam, cfg)
     n = len(p)
     out = empty_result(n)
     if n == 0 or len(boxes) == 0:
@@ -357,8 +351,9 @@ def evaluate_contacts(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m: np.
     uneven = np.ptp(s_rim, axis=1) > cfg.compliance
 
     # Rule 3: the rim's hits and the centre's hit must be what the camera sees there.
-    pts = np.concatenate([rim_start + s_rim[..., None] * a_on[:, None, :], hit0[:, None, :]],
-                         axis=1)  # (M, K + 1, 3)
+    pts = np.concatenate(
+        [rim_start + s_rim[..., None] * a_on[:, None, :], hit0[:, None, :]], axis=1
+    )  # (M, K + 1, 3)
     occluded = occluded_contacts(pts, b + 1, depth_m, mask, intrinsics, cfg)
 
     # Rule 4: the box's weight against the soft contact's wrench limits.
@@ -367,10 +362,17 @@ def evaluate_contacts(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m: np.
     return record_rules(out, on, b + 1, off_face, uneven, occluded, wrench)
 
 
-def robust_quality(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m: np.ndarray,
-                   mask: np.ndarray, intrinsics: Intrinsics, boxes: Sequence,
-                   gravity_cam: np.ndarray, cfg: SuctionModelConfig,
-                   rng: np.random.Generator) -> np.ndarray:
+def robust_quality(
+    points_cam: np.ndarray,
+    axes_cam: np.ndarray,
+    depth_m: np.ndarray,
+    mask: np.ndarray,
+    intrinsics: Intrinsics,
+    boxes: Sequence,
+    gravity_cam: np.ndarray,
+    cfg: SuctionModelConfig,
+    rng: np.random.Generator,
+) -> np.ndarray:
     """Robust quality of N suction grasps: the share of perturbed grasps that seal and resist.
 
     Each candidate gets ``cfg.perturbations`` perturbed grasps. The contact point is shifted in
@@ -391,13 +393,22 @@ def robust_quality(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m: np.nda
     points, axes = perturbed_grasps(points_cam, axes_cam, cfg, rng)
     if len(points) == 0:
         return np.zeros(0)
-    result = evaluate_contacts(points.reshape(-1, 3), axes.reshape(-1, 3), depth_m, mask,
-                               intrinsics, boxes, gravity_cam, cfg)
+    result = evaluate_contacts(
+        points.reshape(-1, 3),
+        axes.reshape(-1, 3),
+        depth_m,
+        mask,
+        intrinsics,
+        boxes,
+        gravity_cam,
+        cfg,
+    )
     return result.wrench_ok.reshape(points.shape[:2]).mean(axis=1)
 
 
-def perturbed_grasps(points_cam: np.ndarray, axes_cam: np.ndarray, cfg: SuctionModelConfig,
-                     rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+def perturbed_grasps(
+    points_cam: np.ndarray, axes_cam: np.ndarray, cfg: SuctionModelConfig, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
     """``cfg.perturbations`` = P perturbed copies of each of N grasps (``robust_quality``'s
     model): points (N, P, 3) and unit axes (N, P, 3), camera frame. Drawn from ``rng`` in this
     order: in-plane shifts (N, P, 2) of N(0, sigma_position), tilts (N, P) of

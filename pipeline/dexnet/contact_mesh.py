@@ -2,7 +2,7 @@
 
 ``pipeline.dexnet.contact`` labels candidate suction grasps exactly, but only on boxes: it casts
 its lines by the slab method. This module applies the same rules, with the same reason codes
-(``contact.REASONS``), settings (``contact.SuctionModelConfig``) and result
+(``contact.REASONS``), settings (``pipeline.grasping.suction.SuctionModelConfig``) and result
 (``contact.ContactResult``), to the bodies of a pybullet scene, such as the cylinders, prisms
 and convex hulls of ``pipeline.simulation.objects``, by casting its lines with
 ``p.rayTestBatch``. Read ``contact``'s docstring first; only what differs is spelt out here.
@@ -74,9 +74,18 @@ import trimesh
 
 from pipeline.camera.geometry import Intrinsics, pose_matrix
 from pipeline.dexnet.contact import (  # noqa: F401  (REASONS etc. re-exported for callers)
-    REASONS, START_OFFSET, ContactResult, SuctionModelConfig, checked_inputs, empty_result,
-    occluded_contacts, perturbed_grasps, record_rules, rim_ring, wrench_failures,
+    REASONS,
+    START_OFFSET,
+    ContactResult,
+    checked_inputs,
+    empty_result,
+    occluded_contacts,
+    perturbed_grasps,
+    record_rules,
+    rim_ring,
+    wrench_failures,
 )
+from pipeline.grasping.suction import SuctionModelConfig
 
 # Largest angle between a rim hit's surface normal and the centre hit's that still seals.
 MAX_NORMAL_ANGLE_DEG = 45.0
@@ -103,8 +112,10 @@ class RayScene:
 
     def __init__(self, client: int, body_ids: Sequence[int] | None = None) -> None:
         if body_ids is None:
-            body_ids = [p.getBodyUniqueId(i, physicsClientId=client)
-                        for i in range(p.getNumBodies(physicsClientId=client))]
+            body_ids = [
+                p.getBodyUniqueId(i, physicsClientId=client)
+                for i in range(p.getNumBodies(physicsClientId=client))
+            ]
         self.source = client
         self.client = p.connect(p.DIRECT)
         self._owner: dict[int, int] = {}  # copy body id -> source body id
@@ -133,19 +144,23 @@ class RayScene:
                 mesh = trimesh.creation.box(extents=np.asarray(dims, np.float64))
                 T = T_base @ pose_matrix(np.asarray(local_pos), np.asarray(local_orn))
             elif geom == p.GEOM_MESH:  # getMeshData's vertices are in the base frame already
-                _, verts = p.getMeshData(body, -1, collisionShapeIndex=k,
-                                         physicsClientId=src)
+                _, verts = p.getMeshData(body, -1, collisionShapeIndex=k, physicsClientId=src)
                 mesh = trimesh.convex.convex_hull(np.asarray(verts, np.float64))
                 T = T_base
             else:
-                raise ValueError(f"body {body} has a collision shape of pybullet geometry type "
-                                 f"{geom}: RayScene copies boxes and convex meshes only")
+                raise ValueError(
+                    f"body {body} has a collision shape of pybullet geometry type "
+                    f"{geom}: RayScene copies boxes and convex meshes only"
+                )
             world = np.asarray(mesh.vertices, np.float64) @ T[:3, :3].T + T[:3, 3]
             faces = np.asarray(mesh.faces, np.int64)
-            col = p.createCollisionShape(p.GEOM_MESH, vertices=world.tolist(),
-                                         indices=faces.reshape(-1).tolist(),
-                                         flags=p.GEOM_FORCE_CONCAVE_TRIMESH,
-                                         physicsClientId=self.client)
+            col = p.createCollisionShape(
+                p.GEOM_MESH,
+                vertices=world.tolist(),
+                indices=faces.reshape(-1).tolist(),
+                flags=p.GEOM_FORCE_CONCAVE_TRIMESH,
+                physicsClientId=self.client,
+            )
             copy = p.createMultiBody(0.0, col, -1, physicsClientId=self.client)
             p.setCollisionFilterGroupMask(copy, -1, _ANY, -1, physicsClientId=self.client)
             self._owner[copy] = body
@@ -175,10 +190,13 @@ class RayScene:
         group is in ``mask``: source body id (-1: none), hit point and normal, (R,), (R, 3)."""
         out = []
         for i in range(0, len(starts), RAY_BATCH):
-            out += p.rayTestBatch(np.ascontiguousarray(starts[i:i + RAY_BATCH]),
-                                  np.ascontiguousarray(ends[i:i + RAY_BATCH]),
-                                  numThreads=1, collisionFilterMask=mask,
-                                  physicsClientId=self.client)
+            out += p.rayTestBatch(
+                np.ascontiguousarray(starts[i : i + RAY_BATCH]),
+                np.ascontiguousarray(ends[i : i + RAY_BATCH]),
+                numThreads=1,
+                collisionFilterMask=mask,
+                physicsClientId=self.client,
+            )
         copy = np.array([h[0] for h in out], np.int64)
         point = np.array([h[3] for h in out], np.float64).reshape(-1, 3)
         normal = np.array([h[4] for h in out], np.float64).reshape(-1, 3)
@@ -195,8 +213,9 @@ class RayScene:
             for c in copies:
                 p.setCollisionFilterGroupMask(c, -1, _ANY, -1, physicsClientId=self.client)
 
-    def cast(self, starts: np.ndarray, dirs: np.ndarray,
-             want: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def cast(
+        self, starts: np.ndarray, dirs: np.ndarray, want: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The first hit of each line ``starts + s dirs`` (0 <= s <= ``LINE_LENGTH``) on a body
         that does not contain the line's start; where ``want`` is given, on that body only.
 
@@ -258,19 +277,29 @@ class RayScene:
             p.disconnect(physicsClientId=self.client)
         self.client = None
 
-    def __enter__(self) -> "RayScene":
+    def __enter__(self) -> RayScene:
         return self
 
     def __exit__(self, *exc) -> None:
         self.close()
 
 
-def evaluate_contacts_mesh(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m: np.ndarray,
-                           mask: np.ndarray, intrinsics: Intrinsics, T_world_cam: np.ndarray,
-                           client: int, graspable: Sequence[int], gravity_cam: np.ndarray,
-                           cfg: SuctionModelConfig, *, targets: np.ndarray | None = None,
-                           rays: RayScene | None = None,
-                           max_normal_angle_deg: float = MAX_NORMAL_ANGLE_DEG) -> ContactResult:
+def evaluate_contacts_mesh(
+    points_cam: np.ndarray,
+    axes_cam: np.ndarray,
+    depth_m: np.ndarray,
+    mask: np.ndarray,
+    intrinsics: Intrinsics,
+    T_world_cam: np.ndarray,
+    client: int,
+    graspable: Sequence[int],
+    gravity_cam: np.ndarray,
+    cfg: SuctionModelConfig,
+    *,
+    targets: np.ndarray | None = None,
+    rays: RayScene | None = None,
+    max_normal_angle_deg: float = MAX_NORMAL_ANGLE_DEG,
+) -> ContactResult:
     """Seal and wrench resistance of N suction grasps on pybullet bodies, by the rules of the
     module docstring.
 
@@ -295,8 +324,9 @@ def evaluate_contacts_mesh(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m
     Returns:
         A ContactResult of (N,) arrays; ``instance`` is k for ``graspable[k-1]``, 0 = none.
     """
-    pts, a, g_dir = checked_inputs(points_cam, axes_cam, depth_m, mask, intrinsics, gravity_cam,
-                                   cfg)
+    pts, a, g_dir = checked_inputs(
+        points_cam, axes_cam, depth_m, mask, intrinsics, gravity_cam, cfg
+    )
     graspable = [int(b) for b in graspable]
     n = len(pts)
     if targets is not None:
@@ -312,16 +342,43 @@ def evaluate_contacts_mesh(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m
     if own:
         rays = RayScene(client)
     try:
-        return _evaluate(pts, a, depth_m, mask, intrinsics, np.asarray(T_world_cam, np.float64),
-                         client, graspable, g_dir, cfg, targets, rays, max_normal_angle_deg,
-                         out)
+        return _evaluate(
+            pts,
+            a,
+            depth_m,
+            mask,
+            intrinsics,
+            np.asarray(T_world_cam, np.float64),
+            client,
+            graspable,
+            g_dir,
+            cfg,
+            targets,
+            rays,
+            max_normal_angle_deg,
+            out,
+        )
     finally:
         if own:
             rays.close()
 
 
-def _evaluate(pts, a, depth_m, mask, intrinsics, T_wc, client, graspable, g_dir, cfg, targets,
-              rays: RayScene, max_angle_deg: float, out: ContactResult) -> ContactResult:
+def _evaluate(
+    pts,
+    a,
+    depth_m,
+    mask,
+    intrinsics,
+    T_wc,
+    client,
+    graspable,
+    g_dir,
+    cfg,
+    targets,
+    rays: RayScene,
+    max_angle_deg: float,
+    out: ContactResult,
+) -> ContactResult:
     R_wc, t_wc = T_wc[:3, :3], T_wc[:3, 3]
 
     # Rule 1: the centre line's first hit, against every body.
@@ -339,7 +396,9 @@ def _evaluate(pts, a, depth_m, mask, intrinsics, T_wc, client, graspable, g_dir,
     rim_start = start_on[:, None, :] + rim_ring(a_on, cfg)  # (M, K, 3)
     rim_body, s_rim, rim_normal = rays.cast(
         rim_start.reshape(-1, 3) @ R_wc.T + t_wc,
-        np.repeat(a_on @ R_wc.T, k, axis=0), want=np.repeat(tgt, k))
+        np.repeat(a_on @ R_wc.T, k, axis=0),
+        want=np.repeat(tgt, k),
+    )
     rim_body, s_rim = rim_body.reshape(m, k), s_rim.reshape(m, k)
     cos_dev = np.einsum("mki,mi->mk", rim_normal.reshape(m, k, 3), normal0[on])
     same_face = cos_dev >= np.cos(np.radians(max_angle_deg))
@@ -349,30 +408,45 @@ def _evaluate(pts, a, depth_m, mask, intrinsics, T_wc, client, graspable, g_dir,
 
     # Rule 3: the rim's hits and the centre's hit must be what the camera sees there.
     inst = np.array([graspable.index(int(b)) + 1 for b in tgt], np.int64)
-    pts3 = np.concatenate([rim_start + s_rim[..., None] * a_on[:, None, :], hit0[:, None, :]],
-                          axis=1)  # (M, K + 1, 3)
+    pts3 = np.concatenate(
+        [rim_start + s_rim[..., None] * a_on[:, None, :], hit0[:, None, :]], axis=1
+    )  # (M, K + 1, 3)
     occluded = occluded_contacts(pts3, inst, depth_m, mask, intrinsics, cfg)
 
     # Rule 4: the body's weight against the soft contact's wrench limits.
     mass = np.array([p.getDynamicsInfo(int(b), -1, physicsClientId=client)[0] for b in tgt])
-    com_w = np.array([p.getBasePositionAndOrientation(int(b), physicsClientId=client)[0]
-                      for b in tgt], np.float64).reshape(-1, 3)
+    com_w = np.array(
+        [p.getBasePositionAndOrientation(int(b), physicsClientId=client)[0] for b in tgt],
+        np.float64,
+    ).reshape(-1, 3)
     com = (com_w - t_wc) @ R_wc  # camera frame
     wrench = wrench_failures(mass, com, hit0, a_on, g_dir, cfg)
     return record_rules(out, on, inst, off_face, uneven, occluded, wrench)
 
 
-def robust_quality_mesh(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m: np.ndarray,
-                        mask: np.ndarray, intrinsics: Intrinsics, T_world_cam: np.ndarray,
-                        client: int, graspable: Sequence[int], gravity_cam: np.ndarray,
-                        cfg: SuctionModelConfig, rng: np.random.Generator, *,
-                        targets: np.ndarray | None = None, rays: RayScene | None = None,
-                        max_normal_angle_deg: float = MAX_NORMAL_ANGLE_DEG) -> np.ndarray:
+def robust_quality_mesh(
+    points_cam: np.ndarray,
+    axes_cam: np.ndarray,
+    depth_m: np.ndarray,
+    mask: np.ndarray,
+    intrinsics: Intrinsics,
+    T_world_cam: np.ndarray,
+    client: int,
+    graspable: Sequence[int],
+    gravity_cam: np.ndarray,
+    cfg: SuctionModelConfig,
+    rng: np.random.Generator,
+    *,
+    targets: np.ndarray | None = None,
+    rays: RayScene | None = None,
+    max_normal_angle_deg: float = MAX_NORMAL_ANGLE_DEG,
+) -> np.ndarray:
     """Robust quality of N suction grasps on pybullet bodies: the share of perturbed grasps that
     seal and resist (Dex-Net 3.0).
 
     The perturbations are ``contact.perturbed_grasps``, as in ``contact.robust_quality``, so for
-    the same generator state both functions perturb the same grasps the same way. All perturbed grasps are labelled by one call of
+    the same generator state both functions perturb the same grasps the same way. All perturbed
+    grasps are labelled by one call of
     ``evaluate_contacts_mesh``; a candidate's perturbations keep its target.
 
     Args:
@@ -388,8 +462,19 @@ def robust_quality_mesh(points_cam: np.ndarray, axes_cam: np.ndarray, depth_m: n
         return np.zeros(0)
     if targets is not None:
         targets = np.repeat(np.asarray(targets, np.int64).reshape(-1), k)
-    result = evaluate_contacts_mesh(points.reshape(-1, 3), axes.reshape(-1, 3), depth_m, mask,
-                                    intrinsics, T_world_cam, client, graspable, gravity_cam,
-                                    cfg, targets=targets, rays=rays,
-                                    max_normal_angle_deg=max_normal_angle_deg)
+    result = evaluate_contacts_mesh(
+        points.reshape(-1, 3),
+        axes.reshape(-1, 3),
+        depth_m,
+        mask,
+        intrinsics,
+        T_world_cam,
+        client,
+        graspable,
+        gravity_cam,
+        cfg,
+        targets=targets,
+        rays=rays,
+        max_normal_angle_deg=max_normal_angle_deg,
+    )
     return result.wrench_ok.reshape(n, k).mean(axis=1)

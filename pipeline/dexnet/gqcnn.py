@@ -72,8 +72,9 @@ def crop_angle(axes_cam: np.ndarray) -> np.ndarray:
     return np.where(planar > 1e-6, np.arctan2(axes[:, 1], axes[:, 0]), 0.0)
 
 
-def extract_crops(depth_m: np.ndarray, uv: np.ndarray, depth: np.ndarray, axes_cam: np.ndarray,
-                  cfg: CropConfig) -> np.ndarray:
+def extract_crops(
+    depth_m: np.ndarray, uv: np.ndarray, depth: np.ndarray, axes_cam: np.ndarray, cfg: CropConfig
+) -> np.ndarray:
     """Crops centred on candidates, rotated to their axes: (N, 1, S, S) float32.
 
     Args:
@@ -101,8 +102,14 @@ def extract_crops(depth_m: np.ndarray, uv: np.ndarray, depth: np.ndarray, axes_c
         m = cv2.getRotationMatrix2D((float(u), float(v)), float(angles[i]), scale)
         m[0, 2] += centre - u
         m[1, 2] += centre - v
-        crop = cv2.warpAffine(source, m, (s, s), flags=cv2.INTER_NEAREST,
-                              borderMode=cv2.BORDER_CONSTANT, borderValue=float("nan"))
+        crop = cv2.warpAffine(
+            source,
+            m,
+            (s, s),
+            flags=cv2.INTER_NEAREST,
+            borderMode=cv2.BORDER_CONSTANT,
+            borderValue=float("nan"),
+        )
         rel = (crop - float(depth[i])) / cfg.depth_scale
         out[i, 0] = np.where(np.isfinite(rel), rel, cfg.missing_value)
     return out
@@ -110,12 +117,14 @@ def extract_crops(depth_m: np.ndarray, uv: np.ndarray, depth: np.ndarray, axes_c
 
 def pose_input(cands: Candidates, cfg: CropConfig) -> np.ndarray:
     """(N, 2) float32: normalised candidate depth and approach angle (rad)."""
-    return np.stack([(cands.depth - cfg.d_ground) / cfg.pose_depth_scale, cands.angle],
-                    axis=1).astype(np.float32)
+    return np.stack(
+        [(cands.depth - cfg.d_ground) / cfg.pose_depth_scale, cands.angle], axis=1
+    ).astype(np.float32)
 
 
-def candidate_inputs(depth_m: np.ndarray, cands: Candidates,
-                     cfg: CropConfig) -> tuple[np.ndarray, np.ndarray]:
+def candidate_inputs(
+    depth_m: np.ndarray, cands: Candidates, cfg: CropConfig
+) -> tuple[np.ndarray, np.ndarray]:
     """Crops (N, 1, S, S) and poses (N, 2) of candidates on one depth image."""
     return extract_crops(depth_m, cands.uv, cands.depth, cands.axis, cfg), pose_input(cands, cfg)
 
@@ -130,18 +139,23 @@ class GQCNN(nn.Module):
         layers: list[nn.Module] = []
         c_in = 1
         for c_out, k in ((w, 5), (2 * w, 3), (4 * w, 3)):
-            layers += [nn.Conv2d(c_in, c_out, k, padding=k // 2), nn.ReLU(inplace=True),
-                       nn.MaxPool2d(2)]
+            layers += [
+                nn.Conv2d(c_in, c_out, k, padding=k // 2),
+                nn.ReLU(inplace=True),
+                nn.MaxPool2d(2),
+            ]
             c_in = c_out
         self.features = nn.Sequential(*layers)
         side = cfg.crop_size // 8
         if side < 1:
             raise ValueError(f"crop_size {cfg.crop_size} is too small: at least 8 px")
-        self.image_fc = nn.Sequential(nn.Flatten(), nn.Linear(c_in * side * side, cfg.fc),
-                                      nn.ReLU(inplace=True))
+        self.image_fc = nn.Sequential(
+            nn.Flatten(), nn.Linear(c_in * side * side, cfg.fc), nn.ReLU(inplace=True)
+        )
         self.pose_fc = nn.Sequential(nn.Linear(2, cfg.fc // 4), nn.ReLU(inplace=True))
-        self.head = nn.Sequential(nn.Linear(cfg.fc + cfg.fc // 4, cfg.fc), nn.ReLU(inplace=True),
-                                  nn.Linear(cfg.fc, 1))
+        self.head = nn.Sequential(
+            nn.Linear(cfg.fc + cfg.fc // 4, cfg.fc), nn.ReLU(inplace=True), nn.Linear(cfg.fc, 1)
+        )
 
     def forward(self, crops: torch.Tensor, poses: torch.Tensor) -> torch.Tensor:
         x = self.image_fc(self.features(crops))
@@ -149,15 +163,16 @@ class GQCNN(nn.Module):
 
 
 @torch.no_grad()
-def predict_quality(net: GQCNN, crops: np.ndarray, poses: np.ndarray,
-                    batch: int = 256) -> np.ndarray:
+def predict_quality(
+    net: GQCNN, crops: np.ndarray, poses: np.ndarray, batch: int = 256
+) -> np.ndarray:
     """Probability of a robust grasp for each candidate: (N,) float64 in [0, 1]."""
     net.eval()
     out = np.empty(len(crops), np.float64)
     for start in range(0, len(crops), batch):
-        c = torch.from_numpy(np.ascontiguousarray(crops[start:start + batch]))
-        p = torch.from_numpy(np.ascontiguousarray(poses[start:start + batch]))
-        out[start:start + batch] = torch.sigmoid(net(c, p)).double().numpy()
+        c = torch.from_numpy(np.ascontiguousarray(crops[start : start + batch]))
+        p = torch.from_numpy(np.ascontiguousarray(poses[start : start + batch]))
+        out[start : start + batch] = torch.sigmoid(net(c, p)).double().numpy()
     return out
 
 

@@ -26,18 +26,17 @@ from dataclasses import dataclass
 import numpy as np
 import pybullet as p
 
-from pipeline.camera.geometry import (
-    Intrinsics, camera_pose_above_bin, gravity_in_camera,
-)
+from pipeline.camera.geometry import Intrinsics, camera_pose_above_bin, gravity_in_camera
 from pipeline.camera.raycast_convex import render_convex_depth
 from pipeline.camera.render import check_renderer, render_depth
 from pipeline.camera.sensor import apply_sensor_model
-from pipeline.dexnet.contact import LABELLED_CANDIDATE_FIELDS, suction_model_config
+from pipeline.cell.bin import build_cell
+from pipeline.dexnet.contact import LABELLED_CANDIDATE_FIELDS
 from pipeline.dexnet.contact_mesh import RayScene, evaluate_contacts_mesh, robust_quality_mesh
 from pipeline.dexnet.gqcnn import candidate_inputs
 from pipeline.dexnet.planner import crop_config, sampler_config, workspace
 from pipeline.dexnet.sampling import Candidates, point_cloud_image, sample_candidates
-from pipeline.cell.bin import build_cell
+from pipeline.grasping.suction import suction_model_config
 from pipeline.simulation.object_heap import ObjectHeap, drop_object_heap
 
 # An object heap's generator is seeded by (seed, OOD_SEED, split code, index): four numbers, so
@@ -83,10 +82,17 @@ class ObjectHeapScene:
     poses: np.ndarray
 
 
-def label_candidates(client: int, graspable: list[int], cands: Candidates,
-                     depth_clean_m: np.ndarray, mask: np.ndarray, intrinsics: Intrinsics,
-                     T_world_cam: np.ndarray, model, rng: np.random.Generator
-                     ) -> tuple[np.ndarray, np.ndarray]:
+def label_candidates(
+    client: int,
+    graspable: list[int],
+    cands: Candidates,
+    depth_clean_m: np.ndarray,
+    mask: np.ndarray,
+    intrinsics: Intrinsics,
+    T_world_cam: np.ndarray,
+    model,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, np.ndarray]:
     """Robust quality and unperturbed contact outcome of candidates on the live bodies of
     ``client`` (``contact_mesh``; one ``RayScene`` mirror for both), gravity along world -z.
 
@@ -102,8 +108,16 @@ def label_candidates(client: int, graspable: list[int], cands: Candidates,
     """
     if len(cands) == 0 or not graspable:
         return np.zeros(len(cands)), np.zeros(len(cands), np.int8)
-    args = (depth_clean_m, mask, intrinsics, T_world_cam, client, list(graspable),
-            gravity_in_camera(T_world_cam), model)
+    args = (
+        depth_clean_m,
+        mask,
+        intrinsics,
+        T_world_cam,
+        client,
+        list(graspable),
+        gravity_in_camera(T_world_cam),
+        model,
+    )
     with RayScene(client) as rays:
         quality = robust_quality_mesh(cands.point, cands.axis, *args, rng, rays=rays)
         reason = evaluate_contacts_mesh(cands.point, cands.axis, *args, rays=rays).reason
@@ -112,12 +126,14 @@ def label_candidates(client: int, graspable: list[int], cands: Candidates,
 
 def _stored(depth_m: np.ndarray, unit: float) -> np.ndarray:
     """Depth as a generation shard stores and returns it: rounded to ``unit`` (uint16), m."""
-    return (np.round(np.asarray(depth_m, np.float64) / unit).astype(np.uint16)
-            .astype(np.float32) * np.float32(unit))
+    return np.round(np.asarray(depth_m, np.float64) / unit).astype(np.uint16).astype(
+        np.float32
+    ) * np.float32(unit)
 
 
-def object_heap_scene(client: int, cfg, rng: np.random.Generator, count: int, sensor_cfg,
-                      depth_unit: float) -> ObjectHeapScene:
+def object_heap_scene(
+    client: int, cfg, rng: np.random.Generator, count: int, sensor_cfg, depth_unit: float
+) -> ObjectHeapScene:
     """Build, render, sample and label one object heap in the pybullet client ``client`` (reset).
 
     Args:
@@ -140,11 +156,25 @@ def object_heap_scene(client: int, cfg, rng: np.random.Generator, count: int, se
     ids = [o.body_id for o in heap.objects]
     ground = (-float(cfg.bin.floor_thickness), cell[0])
     if renderer == "raycast":
-        frame = render_convex_depth(client, intr, T_world_cam, cfg.camera.near, cfg.camera.far,
-                                    ground=ground, bodies=cell[1:] + ids)
+        frame = render_convex_depth(
+            client,
+            intr,
+            T_world_cam,
+            cfg.camera.near,
+            cfg.camera.far,
+            ground=ground,
+            bodies=cell[1:] + ids,
+        )
     else:
-        frame = render_depth(client, intr, T_world_cam, cfg.camera.near, cfg.camera.far,
-                             ground=ground, renderer=renderer)
+        frame = render_depth(
+            client,
+            intr,
+            T_world_cam,
+            cfg.camera.near,
+            cfg.camera.far,
+            ground=ground,
+            renderer=renderer,
+        )
     lut = np.zeros(int(frame.body_ids.max(initial=-1)) + 2, dtype=np.uint8)
     for k, body in enumerate(ids, start=1):
         if body + 1 < len(lut):
@@ -159,17 +189,27 @@ def object_heap_scene(client: int, cfg, rng: np.random.Generator, count: int, se
     cloud = point_cloud_image(depth, intr, sampler, object_mask=object_mask)
     cands = sample_candidates(cloud, int(count), rng, sampler)
     model = suction_model_config(cfg, float(cfg.objects.density))
-    quality, reason = label_candidates(client, ids, cands, depth_clean, mask, intr, T_world_cam,
-                                       model, rng)
+    quality, reason = label_candidates(
+        client, ids, cands, depth_clean, mask, intr, T_world_cam, model, rng
+    )
     crop = crop_config(cfg)
     crops, poses = candidate_inputs(depth, cands, crop)
     crops = np.asarray(crops, np.float16).reshape(len(cands), 1, crop.size, crop.size)
     quality = np.asarray(quality, np.float64)
-    return ObjectHeapScene(depth_m=depth, depth_clean_m=depth_clean, mask=mask, intrinsics=intr,
-                           T_world_cam=T_world_cam, heap=heap, candidates=cands,
-                           quality=quality, label=quality >= model.quality_threshold,
-                           reason=np.asarray(reason, np.int8), crops=crops,
-                           poses=np.asarray(poses, np.float32).reshape(len(cands), 2))
+    return ObjectHeapScene(
+        depth_m=depth,
+        depth_clean_m=depth_clean,
+        mask=mask,
+        intrinsics=intr,
+        T_world_cam=T_world_cam,
+        heap=heap,
+        candidates=cands,
+        quality=quality,
+        label=quality >= model.quality_threshold,
+        reason=np.asarray(reason, np.int8),
+        crops=crops,
+        poses=np.asarray(poses, np.float32).reshape(len(cands), 2),
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -206,8 +246,11 @@ def plan_ood_tasks(ood_cfg, folder) -> list[OODTask]:
     tasks = []
     for split, n in (("train", int(ood_cfg.num_scenes)), ("val", int(ood_cfg.num_val_scenes))):
         for k, first in enumerate(range(0, n, per)):
-            tasks.append(OODTask(split, first, min(per, n - first),
-                                 str(Path(folder) / f"{split}-{k:05d}.npz")))
+            tasks.append(
+                OODTask(
+                    split, first, min(per, n - first), str(Path(folder) / f"{split}-{k:05d}.npz")
+                )
+            )
     return tasks
 
 
@@ -220,29 +263,38 @@ def check_ood_config(cfg) -> None:
     ood = cfg.baseline.ood
     for key in ("num_scenes", "scenes_per_shard", "candidates_per_scene"):
         if int(ood[key]) < 1:
-            raise ValueError(f"baseline.ood.{key} must be >= 1 for the gqcnn_ood variant, got "
-                             f"{ood[key]} (or leave gqcnn_ood out of baseline.variants)")
+            raise ValueError(
+                f"baseline.ood.{key} must be >= 1 for the gqcnn_ood variant, got "
+                f"{ood[key]} (or leave gqcnn_ood out of baseline.variants)"
+            )
     if int(ood.num_val_scenes) < 0:
         raise ValueError(f"baseline.ood.num_val_scenes must be >= 0, got {ood.num_val_scenes}")
     spec = object_spec(cfg.objects)
     unknown = sorted(set(spec.families) - set(FAMILIES))
     if not list(spec.families) or unknown:
-        raise ValueError(f"objects.families must be a non-empty selection of {list(FAMILIES)}, "
-                         f"got {list(spec.families)} (conf/objects/)")
+        raise ValueError(
+            f"objects.families must be a non-empty selection of {list(FAMILIES)}, "
+            f"got {list(spec.families)} (conf/objects/)"
+        )
     lo, hi = int(cfg.objects.min_count), int(cfg.objects.max_count)
     if not 1 <= lo <= hi:
-        raise ValueError(f"objects.min_count and max_count must satisfy 1 <= min <= max (an "
-                         f"empty heap has nothing to learn from), got {lo} and {hi}")
+        raise ValueError(
+            f"objects.min_count and max_count must satisfy 1 <= min <= max (an "
+            f"empty heap has nothing to learn from), got {lo} and {hi}"
+        )
 
 
 def shard_summary(split: str, arrays: dict, num_reasons: int) -> dict:
     """Counts of one shard for the stage's manifest."""
-    return {"split": split, "scenes": int(len(arrays["heap_objects"])),
-            "objects": int(arrays["heap_objects"].sum()),
-            "not_settled": int((~arrays["heap_settled"].astype(bool)).sum()),
-            "candidates": int(len(arrays["label"])), "positives": int(arrays["label"].sum()),
-            "reasons": np.bincount(arrays["reason"].astype(np.int64),
-                                   minlength=num_reasons).tolist()}
+    return {
+        "split": split,
+        "scenes": int(len(arrays["heap_objects"])),
+        "objects": int(arrays["heap_objects"].sum()),
+        "not_settled": int((~arrays["heap_settled"].astype(bool)).sum()),
+        "candidates": int(len(arrays["label"])),
+        "positives": int(arrays["label"].sum()),
+        "reasons": np.bincount(arrays["reason"].astype(np.int64), minlength=num_reasons).tolist(),
+    }
 
 
 _STATE: dict = {}
@@ -268,8 +320,9 @@ def ood_shard(task: OODTask) -> dict:
     cols: dict[str, list] = {k: [] for k in OOD_FIELDS}
     for index in range(task.first, task.first + task.count):
         rng = object_scene_rng(int(cfg.seed), SPLIT_CODES[task.split], index)
-        scene = object_heap_scene(_STATE["client"], cfg, rng, count, _STATE["sensor"],
-                                  _STATE["unit"])
+        scene = object_heap_scene(
+            _STATE["client"], cfg, rng, count, _STATE["sensor"], _STATE["unit"]
+        )
         c = scene.candidates
         m = len(c)
         cols["scene_index"].append(np.full(m, index, np.int64))
@@ -303,11 +356,16 @@ def ood_shard_from_file(task: OODTask) -> dict | None:
         return None
     try:
         arrays = read_npz(Path(task.path))
-        ok = (set(arrays) == set(OOD_FIELDS) and len(arrays["heap_objects"]) == task.count
-              and np.all((arrays["scene_index"] >= task.first)
-                         & (arrays["scene_index"] < task.first + task.count)))
+        ok = (
+            set(arrays) == set(OOD_FIELDS)
+            and len(arrays["heap_objects"]) == task.count
+            and np.all(
+                (arrays["scene_index"] >= task.first)
+                & (arrays["scene_index"] < task.first + task.count)
+            )
+        )
         return shard_summary(task.split, arrays, len(REASONS)) if ok else None
-    except Exception:  # noqa: BLE001 - any unusable file is simply computed again
+    except Exception:
         return None
 
 

@@ -44,9 +44,7 @@ from pipeline.camera.depth_input import check_depth_image
 from pipeline.camera.geometry import Intrinsics, backproject_pixels, ground_distance
 from pipeline.config.build import from_section
 from pipeline.dexnet.cem import CEMConfig, CEMResult, cross_entropy_method
-from pipeline.dexnet.gqcnn import (
-    GQCNN, CropConfig, GQCNNConfig, candidate_inputs, predict_quality,
-)
+from pipeline.dexnet.gqcnn import GQCNN, CropConfig, GQCNNConfig, candidate_inputs, predict_quality
 from pipeline.dexnet.quality import PlanarityConfig, disc_planarity
 from pipeline.dexnet.sampling import Candidates, PointCloudImage, SamplerConfig, point_cloud_image
 from pipeline.planner.planner import ModelFileError, build_from_blob, read_model_file
@@ -57,11 +55,16 @@ MODEL_FILE = "gqcnn.pt"
 # each scores with and, for a trained one, its file in the baseline artifact. ``gqcnn``: trained
 # on the box heaps; ``gqcnn_ood``: the same network trained on heaps of other objects.
 OOD_MODEL_FILE = "gqcnn_ood.pt"
-BASELINE_VARIANTS = {"gqcnn": ("gqcnn", MODEL_FILE), "gqcnn_ood": ("gqcnn", OOD_MODEL_FILE),
-                     "planarity": ("planarity", None)}
+BASELINE_VARIANTS = {
+    "gqcnn": ("gqcnn", MODEL_FILE),
+    "gqcnn_ood": ("gqcnn", OOD_MODEL_FILE),
+    "planarity": ("planarity", None),
+}
 MODEL_KEYS = ("network", "crop", "state_dict")
-REBUILD_FIX = ("re-run the baseline stage with `make baseline` (`python -m pipeline.baseline`), "
-               "or pass a data/baseline/<version> folder made by this version of the pipeline")
+REBUILD_FIX = (
+    "re-run the baseline stage with `make baseline` (`python -m pipeline.stages.baseline`), "
+    "or pass a data/baseline/<version> folder made by this version of the pipeline"
+)
 
 # ``DexNetPlanner.last_reason`` after a plan without a grasp (see the module docstring).
 NO_VALID_DEPTH = "no_valid_depth"
@@ -105,8 +108,12 @@ class Workspace:
         pts = backproject_pixels(np.stack([u, v], axis=-1), z, intrinsics)
         R, t = self.T_world_cam[:3, :3], self.T_world_cam[:3, 3]
         world = pts @ R.T + t
-        return ((z > 0) & (np.abs(world[..., 0]) < self.half_x)
-                & (np.abs(world[..., 1]) < self.half_y) & (world[..., 2] > self.object_margin))
+        return (
+            (z > 0)
+            & (np.abs(world[..., 0]) < self.half_x)
+            & (np.abs(world[..., 1]) < self.half_y)
+            & (world[..., 2] > self.object_margin)
+        )
 
 
 def sampler_config(cfg) -> SamplerConfig:
@@ -133,15 +140,19 @@ def gqcnn_config(cfg) -> GQCNNConfig:
 def planarity_config(cfg) -> PlanarityConfig:
     """The analytic disc-planarity quality of a composed config (``dexnet.planarity``), with
     the cup radius ``hand.cup_diameter`` / 2."""
-    return from_section(PlanarityConfig, cfg.dexnet.planarity,
-                        cup_radius=float(cfg.hand.cup_diameter) / 2.0)
+    return from_section(
+        PlanarityConfig, cfg.dexnet.planarity, cup_radius=float(cfg.hand.cup_diameter) / 2.0
+    )
 
 
 def workspace(cfg, T_world_cam: np.ndarray) -> Workspace:
     b = cfg.bin
-    return Workspace(half_x=float(b.inner_length_x) / 2.0, half_y=float(b.inner_width_y) / 2.0,
-                     object_margin=float(cfg.dexnet.object_margin),
-                     T_world_cam=np.asarray(T_world_cam, np.float64))
+    return Workspace(
+        half_x=float(b.inner_length_x) / 2.0,
+        half_y=float(b.inner_width_y) / 2.0,
+        object_margin=float(cfg.dexnet.object_margin),
+        T_world_cam=np.asarray(T_world_cam, np.float64),
+    )
 
 
 def load_gqcnn(model_dir: Path | str) -> tuple[GQCNN, CropConfig]:
@@ -149,31 +160,47 @@ def load_gqcnn(model_dir: Path | str) -> tuple[GQCNN, CropConfig]:
     path = Path(model_dir)
     path = path / MODEL_FILE if path.is_dir() else path
     if not path.is_file():
-        raise FileNotFoundError(f"{path} not found: give a baseline artifact folder "
-                                "(data/baseline/<version>) made by `python -m pipeline.baseline`")
-    blob = read_model_file(path, MODEL_KEYS, "GQ-CNN (gqcnn.pt of `python -m pipeline.baseline`)",
-                           REBUILD_FIX)
-    net = build_from_blob(path, REBUILD_FIX, lambda: GQCNN(GQCNNConfig(**blob["network"])),
-                          blob["state_dict"])
+        raise FileNotFoundError(
+            f"{path} not found: give a baseline artifact folder "
+            "(data/baseline/<version>) made by `python -m pipeline.stages.baseline`"
+        )
+    blob = read_model_file(
+        path, MODEL_KEYS, "GQ-CNN (gqcnn.pt of `python -m pipeline.stages.baseline`)", REBUILD_FIX
+    )
+    net = build_from_blob(
+        path, REBUILD_FIX, lambda: GQCNN(GQCNNConfig(**blob["network"])), blob["state_dict"]
+    )
     try:
         crop = CropConfig(**blob["crop"])
     except TypeError as exc:
-        raise ModelFileError(f"{path}: its crop config does not fit this version of the "
-                             f"pipeline ({exc}): {REBUILD_FIX}") from None
+        raise ModelFileError(
+            f"{path}: its crop config does not fit this version of the "
+            f"pipeline ({exc}): {REBUILD_FIX}"
+        ) from None
     return net.eval(), crop
 
 
 class DexNetPlanner:
     """Segmask → normals → CEM with one quality function → the best suction grasp."""
 
-    def __init__(self, variant: str, workspace: Workspace, sampler: SamplerConfig,
-                 cem: CEMConfig, planarity: PlanarityConfig, crop: CropConfig | None = None,
-                 net: GQCNN | None = None, seed: int = 0) -> None:
+    def __init__(
+        self,
+        variant: str,
+        workspace: Workspace,
+        sampler: SamplerConfig,
+        cem: CEMConfig,
+        planarity: PlanarityConfig,
+        crop: CropConfig | None = None,
+        net: GQCNN | None = None,
+        seed: int = 0,
+    ) -> None:
         if variant not in VARIANTS:
             raise ValueError(f"unknown Dex-Net variant {variant!r}: choose one of {VARIANTS}")
         if variant == "gqcnn" and (net is None or crop is None):
-            raise ValueError("the gqcnn variant needs a trained GQ-CNN: pass model_dir=<baseline "
-                             "artifact> (made by `python -m pipeline.baseline`)")
+            raise ValueError(
+                "the gqcnn variant needs a trained GQ-CNN: pass model_dir=<baseline "
+                "artifact> (made by `python -m pipeline.stages.baseline`)"
+            )
         self.variant, self.workspace = variant, workspace
         self.sampler, self.cem, self.planarity = sampler, cem, planarity
         self.crop, self.net = crop, net
@@ -182,24 +209,36 @@ class DexNetPlanner:
         self.last_reason = ""  # why the last plan/run_cem found no grasp (NO_GRASP_REASONS)
 
     @classmethod
-    def from_config(cls, cfg, variant: str, T_world_cam: np.ndarray,
-                    model_dir: Path | str | None = None) -> "DexNetPlanner":
+    def from_config(
+        cls, cfg, variant: str, T_world_cam: np.ndarray, model_dir: Path | str | None = None
+    ) -> DexNetPlanner:
         net = crop = None
         if variant == "gqcnn":
             if model_dir is None:
                 raise ValueError("the gqcnn variant needs model_dir=<baseline artifact folder>")
             net, crop = load_gqcnn(model_dir)
-        return cls(variant, workspace(cfg, T_world_cam), sampler_config(cfg), cem_config(cfg),
-                   planarity_config(cfg), crop, net, seed=int(cfg.seed))
+        return cls(
+            variant,
+            workspace(cfg, T_world_cam),
+            sampler_config(cfg),
+            cem_config(cfg),
+            planarity_config(cfg),
+            crop,
+            net,
+            seed=int(cfg.seed),
+        )
 
     @classmethod
-    def for_variant(cls, cfg, variant: str, T_world_cam: np.ndarray,
-                    baseline_dir: Path | str | None = None) -> "DexNetPlanner":
+    def for_variant(
+        cls, cfg, variant: str, T_world_cam: np.ndarray, baseline_dir: Path | str | None = None
+    ) -> DexNetPlanner:
         """The planner of a ``BASELINE_VARIANTS`` name, its GQ-CNN (if any) read from the
         baseline artifact folder ``baseline_dir``."""
         if variant not in BASELINE_VARIANTS:
-            raise ValueError(f"unknown Dex-Net-style planner {variant!r}: choose one of "
-                             f"{', '.join(BASELINE_VARIANTS)}")
+            raise ValueError(
+                f"unknown Dex-Net-style planner {variant!r}: choose one of "
+                f"{', '.join(BASELINE_VARIANTS)}"
+            )
         quality, model_file = BASELINE_VARIANTS[variant]
         if model_file is None:
             return cls.from_config(cfg, quality, T_world_cam)
@@ -216,8 +255,9 @@ class DexNetPlanner:
         crops, poses = candidate_inputs(depth_m, cands, self.crop)
         return predict_quality(self.net, crops, poses)
 
-    def run_cem(self, depth_m: np.ndarray, intrinsics: Intrinsics,
-                rng: np.random.Generator) -> CEMResult:
+    def run_cem(
+        self, depth_m: np.ndarray, intrinsics: Intrinsics, rng: np.random.Generator
+    ) -> CEMResult:
         """The whole CEM run (every iteration's candidates and scores, for logging).
 
         Bad depth values are no data, a bad shape/dtype raises a ``ValueError`` (module
@@ -228,8 +268,9 @@ class DexNetPlanner:
     def _check(self, depth_m: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
         return check_depth_image(depth_m, (intrinsics.height, intrinsics.width), name="depth_m")
 
-    def _run_cem(self, depth_m: np.ndarray, intrinsics: Intrinsics,
-                 rng: np.random.Generator) -> CEMResult:
+    def _run_cem(
+        self, depth_m: np.ndarray, intrinsics: Intrinsics, rng: np.random.Generator
+    ) -> CEMResult:
         none = CEMResult(best=Candidates.empty(), best_score=-np.inf)
         self.last_reason = ""
         if not (depth_m > 0).any():
@@ -240,14 +281,20 @@ class DexNetPlanner:
             self.last_reason = NO_OBJECT_PIXELS
             return none
         cloud = point_cloud_image(depth_m, intrinsics, self.sampler, object_mask=mask)
-        result = cross_entropy_method(cloud, lambda c: self.score(depth_m, cloud, c), self.cem,
-                                      self.sampler, rng)
+        result = cross_entropy_method(
+            cloud, lambda c: self.score(depth_m, cloud, c), self.cem, self.sampler, rng
+        )
         if len(result.best) == 0:
             self.last_reason = NO_CANDIDATES
         return result
 
-    def plan(self, depth_m: np.ndarray, intrinsics: Intrinsics,
-             rng: np.random.Generator | None = None, max_grasps: int = 1) -> list[SuctionGrasp]:
+    def plan(
+        self,
+        depth_m: np.ndarray,
+        intrinsics: Intrinsics,
+        rng: np.random.Generator | None = None,
+        max_grasps: int = 1,
+    ) -> list[SuctionGrasp]:
         """One (H, W) depth image, metres → ``[best grasp, ...]``, or ``[]`` when no candidate
         exists (the reason in ``self.last_reason``). With ``max_grasps`` > 1, after the best come
         the other candidates of CEM's final set, best quality first, one per pixel: the
@@ -266,9 +313,16 @@ class DexNetPlanner:
 
 def _grasp(c: Candidates, i: int, score: float) -> SuctionGrasp:
     axis = c.axis[i]
-    return SuctionGrasp(u=float(c.uv[i, 0]), v=float(c.uv[i, 1]), score=float(score),
-                        depth=float(c.depth[i]), point_cam=c.point[i].copy(), normal_cam=-axis,
-                        axis_cam=axis.copy(), angle=float(c.angle[i]))
+    return SuctionGrasp(
+        u=float(c.uv[i, 0]),
+        v=float(c.uv[i, 1]),
+        score=float(score),
+        depth=float(c.depth[i]),
+        point_cam=c.point[i].copy(),
+        normal_cam=-axis,
+        axis_cam=axis.copy(),
+        angle=float(c.angle[i]),
+    )
 
 
 def grasps_of(result: CEMResult, max_grasps: int = 1) -> list[SuctionGrasp]:

@@ -30,8 +30,7 @@ class PlanarityConfig:
     min_coverage: float
 
 
-def disc_planarity(cloud: PointCloudImage, cands: Candidates, cfg: PlanarityConfig
-                   ) -> np.ndarray:
+def disc_planarity(cloud: PointCloudImage, cands: Candidates, cfg: PlanarityConfig) -> np.ndarray:
     """Disc approach planarity of suction candidates, in [0, 1].
 
     For a candidate with contact point ``c`` and unit approach axis ``a`` (camera frame), the
@@ -81,27 +80,28 @@ def disc_planarity(cloud: PointCloudImage, cands: Candidates, cfg: PlanarityConf
     for h in np.unique(half[ok]):
         idx = np.nonzero(ok & (half == h))[0]
         off = np.arange(-h, h + 1)
-        du, dv = np.meshgrid(off, off)                              # (S, S)
-        u = cands.uv[idx, 0][:, None] + du.reshape(1, -1)           # (K, S*S)
+        du, dv = np.meshgrid(off, off)  # (S, S)
+        u = cands.uv[idx, 0][:, None] + du.reshape(1, -1)  # (K, S*S)
         v = cands.uv[idx, 1][:, None] + dv.reshape(1, -1)
         inside = (u >= 0) & (u < W) & (v >= 0) & (v < H)
         ui, vi = np.clip(u, 0, W - 1), np.clip(v, 0, H - 1)
         has = inside & (cloud.depth[vi, ui] > 0)
-        p = cloud.points[vi, ui]                                    # (K, M, 3)
+        p = cloud.points[vi, ui]  # (K, M, 3)
         c = c_all[idx][:, None, :]
         a = a_all[idx][:, None, :]
 
         # Observed disc points and their distances to the approach plane.
         d = p - c
         along = np.einsum("kmc,kmc->km", d, a)
-        lateral2 = np.einsum("kmc,kmc->km", d, d) - along ** 2
+        lateral2 = np.einsum("kmc,kmc->km", d, d) - along**2
         in_disc = has & (lateral2 <= r * r)
         cnt = in_disc.sum(axis=1)
-        msr = np.where(in_disc, along ** 2, 0.0).sum(axis=1) / np.maximum(cnt, 1)
+        msr = np.where(in_disc, along**2, 0.0).sum(axis=1) / np.maximum(cnt, 1)
 
         # Expected footprint: rays through the window pixels meet the plane within r of c.
-        rays = np.stack([(u - intr.cx) / intr.fx, (v - intr.cy) / intr.fy,
-                         np.ones(u.shape)], axis=-1)                # (K, M, 3)
+        rays = np.stack(
+            [(u - intr.cx) / intr.fx, (v - intr.cy) / intr.fy, np.ones(u.shape)], axis=-1
+        )  # (K, M, 3)
         denom = np.einsum("kmc,kmc->km", rays, a)
         num = np.einsum("kc,kc->k", c_all[idx], a_all[idx])[:, None]
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -111,7 +111,7 @@ def disc_planarity(cloud: PointCloudImage, cands: Candidates, cfg: PlanarityConf
         n_exp = expected.sum(axis=1)
         cover = (expected & has).sum(axis=1) / np.maximum(n_exp, 1)
 
-        qg = np.exp(-msr / cfg.sigma ** 2)
+        qg = np.exp(-msr / cfg.sigma**2)
         qg[(n_exp == 0) | (cnt == 0) | (cover < cfg.min_coverage)] = 0.0
         q[idx] = qg
     return q

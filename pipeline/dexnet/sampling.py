@@ -79,8 +79,12 @@ class PointCloudImage:
         return self.depth.shape
 
 
-def point_cloud_image(depth_m: np.ndarray, intrinsics: Intrinsics, cfg: SamplerConfig,
-                      object_mask: np.ndarray | None = None) -> PointCloudImage:
+def point_cloud_image(
+    depth_m: np.ndarray,
+    intrinsics: Intrinsics,
+    cfg: SamplerConfig,
+    object_mask: np.ndarray | None = None,
+) -> PointCloudImage:
     """Back-project a depth image and estimate per-pixel normals, as autolab_core's
     ``CameraIntrinsics.deproject_to_image`` + ``PointCloudImage.normal_cloud_im``.
 
@@ -105,8 +109,10 @@ def point_cloud_image(depth_m: np.ndarray, intrinsics: Intrinsics, cfg: SamplerC
     depth = np.asarray(depth_m, dtype=np.float64)
     H, W = intrinsics.height, intrinsics.width
     if depth.shape != (H, W):
-        raise ValueError(f"depth image has shape {depth.shape}, expected (H, W) = ({H}, {W}) "
-                         "from the camera intrinsics")
+        raise ValueError(
+            f"depth image has shape {depth.shape}, expected (H, W) = ({H}, {W}) "
+            "from the camera intrinsics"
+        )
     has_data = np.isfinite(depth) & (depth > 0)
     depth = np.where(has_data, depth, 0.0)
 
@@ -132,8 +138,12 @@ def point_cloud_image(depth_m: np.ndarray, intrinsics: Intrinsics, cfg: SamplerC
     # Every pixel of the Sobel window (kernel side k; 3 for ksize 1) must have data and lie inside
     # the image: erode the data mask, treating everything outside the image as no data.
     side_px = max(k, 3)
-    window_ok = cv2.erode(has_data.astype(np.uint8), np.ones((side_px, side_px), np.uint8),
-                          borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
+    window_ok = cv2.erode(
+        has_data.astype(np.uint8),
+        np.ones((side_px, side_px), np.uint8),
+        borderType=cv2.BORDER_CONSTANT,
+        borderValue=0,
+    ).astype(bool)
     good = window_ok & np.isfinite(norm) & (norm > 0)
     scale = np.zeros_like(norm)
     scale[good] = np.where(flip[good], -1.0, 1.0) / norm[good]
@@ -145,8 +155,9 @@ def point_cloud_image(depth_m: np.ndarray, intrinsics: Intrinsics, cfg: SamplerC
         if mask.shape != (H, W):
             raise ValueError(f"object mask has shape {mask.shape}, expected ({H}, {W})")
         valid = valid & (mask != 0)
-    return PointCloudImage(points=points, normals=normals, valid=valid, depth=depth,
-                           intrinsics=intrinsics)
+    return PointCloudImage(
+        points=points, normals=normals, valid=valid, depth=depth, intrinsics=intrinsics
+    )
 
 
 @dataclass
@@ -170,35 +181,46 @@ class Candidates:
     def __len__(self) -> int:
         return int(self.uv.shape[0])
 
-    def take(self, idx) -> "Candidates":
+    def take(self, idx) -> Candidates:
         """The candidates selected by ``idx`` (integer indices or an (N,) bool mask)."""
         idx = np.asarray(idx)
         if idx.dtype != bool:
             idx = idx.astype(np.int64).reshape(-1)
-        return Candidates(uv=self.uv[idx], point=self.point[idx], axis=self.axis[idx],
-                          depth=self.depth[idx], angle=self.angle[idx])
+        return Candidates(
+            uv=self.uv[idx],
+            point=self.point[idx],
+            axis=self.axis[idx],
+            depth=self.depth[idx],
+            angle=self.angle[idx],
+        )
 
     @staticmethod
-    def empty() -> "Candidates":
+    def empty() -> Candidates:
         """Zero candidates with correctly shaped arrays."""
-        return Candidates(uv=np.zeros((0, 2), np.int64), point=np.zeros((0, 3)),
-                          axis=np.zeros((0, 3)), depth=np.zeros(0), angle=np.zeros(0))
+        return Candidates(
+            uv=np.zeros((0, 2), np.int64),
+            point=np.zeros((0, 3)),
+            axis=np.zeros((0, 3)),
+            depth=np.zeros(0),
+            angle=np.zeros(0),
+        )
 
     @staticmethod
-    def concat(parts: list["Candidates"]) -> "Candidates":
+    def concat(parts: list[Candidates]) -> Candidates:
         """Concatenate candidate sets in order; an empty list gives :meth:`empty`."""
         parts = [p for p in parts if len(p)]
         if not parts:
             return Candidates.empty()
-        return Candidates(uv=np.concatenate([p.uv for p in parts]),
-                          point=np.concatenate([p.point for p in parts]),
-                          axis=np.concatenate([p.axis for p in parts]),
-                          depth=np.concatenate([p.depth for p in parts]),
-                          angle=np.concatenate([p.angle for p in parts]))
+        return Candidates(
+            uv=np.concatenate([p.uv for p in parts]),
+            point=np.concatenate([p.point for p in parts]),
+            axis=np.concatenate([p.axis for p in parts]),
+            depth=np.concatenate([p.depth for p in parts]),
+            angle=np.concatenate([p.angle for p in parts]),
+        )
 
 
-def candidates_at(cloud: PointCloudImage, uv, cfg: SamplerConfig
-                  ) -> tuple[Candidates, np.ndarray]:
+def candidates_at(cloud: PointCloudImage, uv, cfg: SamplerConfig) -> tuple[Candidates, np.ndarray]:
     """Candidates at given pixels, with gqcnn's acceptance tests.
 
     Depth and approach axis are read from the image at each pixel, as gqcnn does for both the
@@ -226,19 +248,25 @@ def candidates_at(cloud: PointCloudImage, uv, cfg: SamplerConfig
     b = int(cfg.border_px)
     u, v = uv[:, 0], uv[:, 1]
     ok = (u >= b) & (u <= W - 1 - b) & (v >= b) & (v <= H - 1 - b)
-    ok &= (u >= 0) & (u < W) & (v >= 0) & (v < H)       # also when border_px < 0
+    ok &= (u >= 0) & (u < W) & (v >= 0) & (v < H)  # also when border_px < 0
     ui, vi = np.where(ok, u, 0), np.where(ok, v, 0)
     ok &= cloud.valid[vi, ui]
     axis = -cloud.normals[vi, ui]
     angle = np.arccos(np.clip(axis[:, 2], -1.0, 1.0))
     ok &= angle <= np.deg2rad(cfg.max_approach_angle_deg)
-    cands = Candidates(uv=uv[ok], point=cloud.points[vi[ok], ui[ok]], axis=axis[ok],
-                       depth=cloud.depth[vi[ok], ui[ok]], angle=angle[ok])
+    cands = Candidates(
+        uv=uv[ok],
+        point=cloud.points[vi[ok], ui[ok]],
+        axis=axis[ok],
+        depth=cloud.depth[vi[ok], ui[ok]],
+        angle=angle[ok],
+    )
     return cands, ok
 
 
-def sample_candidates(cloud: PointCloudImage, num: int, rng: np.random.Generator,
-                      cfg: SamplerConfig) -> Candidates:
+def sample_candidates(
+    cloud: PointCloudImage, num: int, rng: np.random.Generator, cfg: SamplerConfig
+) -> Candidates:
     """Draw suction candidates as gqcnn's ``DepthImageSuctionPointSampler._sample_suction_points``.
 
     Pixels are drawn uniformly *without replacement* from the valid pixels, at most
@@ -265,7 +293,7 @@ def sample_candidates(cloud: PointCloudImage, num: int, rng: np.random.Generator
     parts: list[Candidates] = []
     kept = 0
     for start in range(0, n_tries, batch):
-        sel = pick[start:start + batch]
+        sel = pick[start : start + batch]
         uv = np.stack([us[sel], vs[sel]], axis=1).astype(np.int64)
         cands, _ok = candidates_at(cloud, uv, cfg)
         cands = cands.take(np.arange(min(num - kept, len(cands))))

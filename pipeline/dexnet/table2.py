@@ -15,15 +15,17 @@ import numpy as np
 
 from pipeline.dataset.scenes import SceneDataset
 from pipeline.dexnet.planner import DexNetPlanner
-from pipeline.labelling.surfaces import true_visible_faces
+from pipeline.labelling.surface_truth import true_visible_faces
 from pipeline.planner.centre_distance import nearest_centre_distance, within_curve, within_rate
 
 OURS = "dcnn"  # the DCNN planner (a training artifact)
 OOD = "gqcnn_ood"  # the GQ-CNN trained on heaps of other objects (``objects``, ``baseline.ood``)
-PLANNER_NAMES = {OURS: "Ours (DCNN, two cups)",
-                 "gqcnn": "Dex-Net-style GQ-CNN + CEM, trained on the box heaps",
-                 OOD: "Dex-Net-style GQ-CNN + CEM, trained on non-box objects",
-                 "planarity": "Dex-Net-style planarity + CEM"}
+PLANNER_NAMES = {
+    OURS: "Ours (DCNN, two cups)",
+    "gqcnn": "Dex-Net-style GQ-CNN + CEM, trained on the box heaps",
+    OOD: "Dex-Net-style GQ-CNN + CEM, trained on non-box objects",
+    "planarity": "Dex-Net-style planarity + CEM",
+}
 EVAL_SEED = 11  # the CEM's generator for test image i: (seed, EVAL_SEED, i)
 
 
@@ -32,6 +34,7 @@ def make_planners(cfg, gen: SceneDataset, model_dir: Path, train_dir: Path | Non
     planners: dict = {}
     if train_dir is not None:
         from pipeline.planner.planner import Planner
+
         dcnn = Planner.load(train_dir, device="cpu")
         planners[OURS] = lambda depth, intr, i: dcnn.plan(depth, intr)
     for variant in cfg.baseline.variants:
@@ -39,12 +42,20 @@ def make_planners(cfg, gen: SceneDataset, model_dir: Path, train_dir: Path | Non
 
         def plan(depth, intr, i, dex=dex):
             return dex.plan(depth, intr, rng=np.random.default_rng([int(cfg.seed), EVAL_SEED, i]))
+
         planners[variant] = plan
     return planners
 
 
-def evaluate_table2(cfg, gen_dir: Path, model_dir: Path, train_dir: Path | None,
-                    progress: bool, planners: dict | None = None, depth_of=None) -> dict:
+def evaluate_table2(
+    cfg,
+    gen_dir: Path,
+    model_dir: Path,
+    train_dir: Path | None,
+    progress: bool,
+    planners: dict | None = None,
+    depth_of=None,
+) -> dict:
     """Every planner on the same test images: chosen points, distances, planning times.
 
     ``planners``: name → plan(depth_m, intrinsics, index) (default ``make_planners``);
@@ -54,16 +65,24 @@ def evaluate_table2(cfg, gen_dir: Path, model_dir: Path, train_dir: Path | None,
     from tqdm import tqdm
 
     gen = SceneDataset(gen_dir, "test")
-    n = len(gen) if int(cfg.baseline.max_eval_images) <= 0 else min(
-        len(gen), int(cfg.baseline.max_eval_images))
+    n = (
+        len(gen)
+        if int(cfg.baseline.max_eval_images) <= 0
+        else min(len(gen), int(cfg.baseline.max_eval_images))
+    )
     if planners is None:
         planners = make_planners(cfg, gen, model_dir, train_dir)
     if depth_of is None:
+
         def depth_of(scene):
             return scene.depth_m
+
     min_px = int(cfg.surfaces.truth_min_visible_px)
-    out = {"scene_index": np.arange(n, dtype=np.int64), "num_centres": np.zeros(n, np.int64),
-           "centres": []}
+    out = {
+        "scene_index": np.arange(n, dtype=np.int64),
+        "num_centres": np.zeros(n, np.int64),
+        "centres": [],
+    }
     times = {name: [] for name in planners}
     for name in planners:
         out[f"{name}_uv"] = np.full((n, 2), np.nan)
@@ -71,8 +90,9 @@ def evaluate_table2(cfg, gen_dir: Path, model_dir: Path, train_dir: Path | None,
         out[f"{name}_dist"] = np.full(n, np.nan)
     for i in tqdm(range(n), desc="table 2", unit="image", disable=not progress):
         scene = gen[i]
-        faces = true_visible_faces(scene.depth_clean_m, scene.mask, scene.intrinsics,
-                                   scene.boxes, min_visible_px=min_px)
+        faces = true_visible_faces(
+            scene.depth_clean_m, scene.mask, scene.intrinsics, scene.boxes, min_visible_px=min_px
+        )
         depth = depth_of(scene)
         centres = np.array([f.center_px for f in faces], np.float64).reshape(-1, 2)
         out["num_centres"][i] = len(centres)
@@ -97,16 +117,27 @@ def table2_rows(result: dict, radius_px: float, radii: np.ndarray) -> tuple[list
         d = result[f"{name}_dist"]
         scored = ~np.isnan(d)
         finite = d[np.isfinite(d)]
-        rows.append({"planner": name, "name": PLANNER_NAMES.get(name, name),
-                     "images": int(scored.sum()),
-                     "no_grasp": int(np.sum(np.isinf(d))),
-                     f"within_{radius_px:g}px": round(within_rate(d, radius_px), 6),
-                     f"within_{radius_px:g}px_inclusive": round(
-                         within_rate(d, radius_px, inclusive=True), 6),
-                     "median_distance_px": round(float(np.median(finite)), 3) if len(finite)
-                     else float("nan")})
-    for k, r in enumerate(radii):
-        curve.append([int(r)] + [round(float(within_curve(result[f"{name}_dist"],
-                                                          np.array([r]))[0]), 6)
-                                 for name in result["planners"]])
+        rows.append(
+            {
+                "planner": name,
+                "name": PLANNER_NAMES.get(name, name),
+                "images": int(scored.sum()),
+                "no_grasp": int(np.sum(np.isinf(d))),
+                f"within_{radius_px:g}px": round(within_rate(d, radius_px), 6),
+                f"within_{radius_px:g}px_inclusive": round(
+                    within_rate(d, radius_px, inclusive=True), 6
+                ),
+                "median_distance_px": round(float(np.median(finite)), 3)
+                if len(finite)
+                else float("nan"),
+            }
+        )
+    for r in radii:
+        curve.append(
+            [int(r)]
+            + [
+                round(float(within_curve(result[f"{name}_dist"], np.array([r]))[0]), 6)
+                for name in result["planners"]
+            ]
+        )
     return rows, curve

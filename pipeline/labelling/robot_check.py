@@ -1,6 +1,6 @@
 """Robot-level labelling (paper Sec. 4.3, Fig. 4e): can the whole robot take this grasp?
 
-The labelling stage asks the robot's own check (:func:`pipeline.controller.grasp_check.check_grasp`:
+The labelling stage asks the robot's own check (:func:`pipeline.labelling.grasp_check.check_grasp`:
 IK, joint limits, no contact at the target pose and, with ``robot.path_check``, along the
 servo's predicted motion) with the heap's true boxes as the obstacles: the labels are made in
 simulation, where the truth is known (the paper's robot-level labels). The box being grasped is
@@ -14,10 +14,10 @@ import pybullet as p
 
 from pipeline.camera.geometry import quat_from_matrix
 from pipeline.cell.bin import build_cell
-from pipeline.controller.grasp_check import check_grasp
 from pipeline.dataset.scenes import Scene
-from pipeline.labelling.hand import HandLabel
-from pipeline.labelling.types import Surface
+from pipeline.grasping.hand import HandLabel
+from pipeline.grasping.types import Surface
+from pipeline.labelling.grasp_check import check_grasp
 from pipeline.robot.model import Robot, robot_config
 
 
@@ -44,9 +44,14 @@ class RobotChecker:
             half = (np.asarray(box.size) / 2).tolist()
             col = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=self.client)
             T = box.T_world_box
-            body = p.createMultiBody(0.0, col, -1, basePosition=T[:3, 3].tolist(),
-                                     baseOrientation=quat_from_matrix(T[:3, :3]).tolist(),
-                                     physicsClientId=self.client)
+            body = p.createMultiBody(
+                0.0,
+                col,
+                -1,
+                basePosition=T[:3, 3].tolist(),
+                baseOrientation=quat_from_matrix(T[:3, :3]).tolist(),
+                physicsClientId=self.client,
+            )
             self.box_bodies[box.instance] = body
         self.robot.load(self.client, ground_z=-bin_cfg.floor_thickness)
         self.obstacles = list(cell) + list(self.box_bodies.values())
@@ -58,8 +63,19 @@ class RobotChecker:
         """None when the robot can take the grasp with one of the hand's rotations about the
         normal (``hand.rotations_deg``, in order; 0 = the paper's axis), else the failed check
         of the paper's rotation (:func:`check_grasp`)."""
-        return check_grasp(self.robot, self.cfg, hand_cfg, self.T_world_cam, surface.center_cam,
-                           surface.normal_cam, surface.long_axis_cam, surface.short_axis_cam,
-                           hand.x_axis_cam, hand.grasp_class.name, self._scene.intrinsics,
-                           self.obstacles, [self.box_bodies[surface.instance]],
-                           self.bin_ids).reason
+        return check_grasp(
+            self.robot,
+            self.cfg,
+            hand_cfg,
+            self.T_world_cam,
+            surface.center_cam,
+            surface.normal_cam,
+            surface.long_axis_cam,
+            surface.short_axis_cam,
+            hand.x_axis_cam,
+            hand.grasp_class.name,
+            self._scene.intrinsics,
+            self.obstacles,
+            [self.box_bodies[surface.instance]],
+            self.bin_ids,
+        ).reason

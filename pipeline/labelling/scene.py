@@ -4,7 +4,7 @@
 the closed loop's home image; its rows are ``pipeline.dataset.labels.LABEL_FIELDS``.
 
 Hold check (``hand.hold_check``, not in the paper): a B, L or R whose cups fit on the face is
-NG ("hold") when the closed loop's hold test (``pipeline.world.suction.hold_test``: pull,
+NG ("hold") when the closed loop's hold test (``pipeline.grasping.suction.hold_test``: pull,
 shear, torsion, bending) says the cups would not carry the box's weight. The cups sit where the
 pattern puts them (L, R: one cup on the surface centre; B: the centre ± ``cup_offset`` along the
 hand's Y), the approach axis is the anti-normal, the box's mass is density × volume and its
@@ -23,13 +23,11 @@ import numpy as np
 
 from pipeline.config.build import from_section
 from pipeline.dataset.scenes import Box, Scene
-from pipeline.dexnet.contact import SuctionModelConfig, box_mass, suction_model_config
-from pipeline.labelling.hand import camera_centre, hand_label
-from pipeline.labelling.surfaces import (
-    SurfaceDetectionConfig, detect_surfaces, match_surfaces, true_visible_faces,
-)
-from pipeline.labelling.hand import HandLabel
-from pipeline.labelling.types import NG_REASONS, GraspClass, Surface
+from pipeline.grasping.hand import HandLabel, camera_centre, hand_label
+from pipeline.grasping.suction import SuctionModelConfig, box_mass, suction_model_config
+from pipeline.grasping.surfaces import SurfaceDetectionConfig, detect_surfaces
+from pipeline.grasping.types import NG_REASONS, GraspClass, Surface
+from pipeline.labelling.surface_truth import match_surfaces, true_visible_faces
 
 
 def surface_config(cfg) -> SurfaceDetectionConfig:
@@ -37,17 +35,23 @@ def surface_config(cfg) -> SurfaceDetectionConfig:
     return from_section(SurfaceDetectionConfig, cfg.surfaces)
 
 
-def pattern_holds(surface: Surface, hl: HandLabel, box: Box, T_world_cam: np.ndarray,
-                  suction: SuctionModelConfig, cup_offset: float) -> bool:
+def pattern_holds(
+    surface: Surface,
+    hl: HandLabel,
+    box: Box,
+    T_world_cam: np.ndarray,
+    suction: SuctionModelConfig,
+    cup_offset: float,
+) -> bool:
     """Whether ``hl``'s pattern, its cups placed on ``surface`` as the pattern puts them, holds
-    ``box``'s weight by ``pipeline.world.suction.hold_test`` (module docstring).
+    ``box``'s weight by ``pipeline.grasping.suction.hold_test`` (module docstring).
 
     Frames: ``surface`` and ``box.T_cam_box`` in the camera frame, ``T_world_cam`` the camera's
     pose in the world (z up); metres. ``suction``: cup radius, vacuum force, friction, gravity
     (m/s²) and the boxes' density (kg/m³), which gives the mass of a box without its own
     ``mass`` (kg).
     """
-    from pipeline.world.suction import hold_test
+    from pipeline.grasping.suction import hold_test
 
     n = np.asarray(surface.normal_cam, np.float64)
     c = np.asarray(surface.center_cam, np.float64)
@@ -58,18 +62,26 @@ def pattern_holds(surface: Surface, hl: HandLabel, box: Box, T_world_cam: np.nda
     else:
         points = c[None]
     gravity_cam = T_world_cam[:3, :3].T @ np.array([0.0, 0.0, -suction.gravity])
-    return hold_test(box_mass(box, suction.density), box.T_cam_box[:3, 3], points, -n, gravity_cam, suction,
-                     cup_offset).ok
+    return hold_test(
+        box_mass(box, suction.density),
+        box.T_cam_box[:3, 3],
+        points,
+        -n,
+        gravity_cam,
+        suction,
+        cup_offset,
+    ).ok
 
 
 def single_cup_order(surface: Surface, hl: HandLabel, hand_cfg) -> tuple[GraspClass, ...]:
     """The single-cup patterns a hand-level B falls back on, in the hand-level rule's order
-    (``pipeline.labelling.hand``, step 4: the pattern whose camera centre is higher first, L
+    (``pipeline.grasping.hand``, step 4: the pattern whose camera centre is higher first, L
     within ``tie_tolerance``); () for a class other than B."""
     if hl.grasp_class != GraspClass.B:
         return ()
-    z_l, z_r = (camera_centre(surface, hl.x_axis_cam, c, hand_cfg)[2]
-                for c in (GraspClass.L, GraspClass.R))
+    z_l, z_r = (
+        camera_centre(surface, hl.x_axis_cam, c, hand_cfg)[2] for c in (GraspClass.L, GraspClass.R)
+    )
     if z_r < z_l - hand_cfg.tie_tolerance:
         return GraspClass.R, GraspClass.L
     return GraspClass.L, GraspClass.R
@@ -90,8 +102,9 @@ def robot_level_class(hl: HandLabel, check, holds, fallback=()) -> tuple[GraspCl
     return GraspClass.NG, first
 
 
-def label_scene(scene: Scene, cfg, robot=None, bin_cfg=None, density: float | None = None
-                ) -> tuple[dict[str, np.ndarray], dict, float, float]:
+def label_scene(
+    scene: Scene, cfg, robot=None, bin_cfg=None, density: float | None = None
+) -> tuple[dict[str, np.ndarray], dict, float, float]:
     """Grasp points of one scene: (rows, accuracy match record, surface seconds, robot seconds).
 
     ``bin_cfg``: the bin the scene was generated in (robot-level collision checks).
@@ -101,20 +114,24 @@ def label_scene(scene: Scene, cfg, robot=None, bin_cfg=None, density: float | No
     suction = None
     if cfg.hand.hold_check:
         if density is None:
-            raise ValueError("label_scene: hand.hold_check is on but no box density was given; "
-                             "pass density= (boxes.density for generated heaps, "
-                             "eval_boxes.density in the closed loop) or set "
-                             "hand.hold_check=false")
+            raise ValueError(
+                "label_scene: hand.hold_check is on but no box density was given; "
+                "pass density= (boxes.density for generated heaps, "
+                "eval_boxes.density in the closed loop) or set "
+                "hand.hold_check=false"
+            )
         suction = suction_model_config(cfg, density)
     t0 = time.perf_counter()
     # Labels come from the ideal depth (the simulator's geometry): with a sensor model the
     # network sees noisy depth with holes but learns where the true surfaces are.
     depth = scene.depth_clean_m
     surfaces = detect_surfaces(depth, scene.mask, scene.intrinsics, surface_config(cfg))
-    truth = true_visible_faces(depth, scene.mask, scene.intrinsics, scene.boxes,
-                               cfg.surfaces.truth_min_visible_px)
-    match = match_surfaces(surfaces, truth, cfg.surfaces.match_max_center_dist,
-                           cfg.surfaces.match_max_normal_deg)
+    truth = true_visible_faces(
+        depth, scene.mask, scene.intrinsics, scene.boxes, cfg.surfaces.truth_min_visible_px
+    )
+    match = match_surfaces(
+        surfaces, truth, cfg.surfaces.match_max_center_dist, cfg.surfaces.match_max_normal_deg
+    )
     t1 = time.perf_counter()
     rows = []
     if robot is not None and surfaces:
@@ -127,19 +144,33 @@ def label_scene(scene: Scene, cfg, robot=None, bin_cfg=None, density: float | No
             # The centre of the visible region falls on another box (a box lying across this
             # face): a cup placed there would not touch this surface.
             hl = dataclasses.replace(hl, grasp_class=GraspClass.NG, reason="center_occluded")
-        if (suction is not None and hl.grasp_class != GraspClass.NG
-                and not pattern_holds(s, hl, scene.boxes[s.instance - 1], scene.T_world_cam,
-                                      suction, float(cfg.hand.cup_offset))):
+        if (
+            suction is not None
+            and hl.grasp_class != GraspClass.NG
+            and not pattern_holds(
+                s,
+                hl,
+                scene.boxes[s.instance - 1],
+                scene.T_world_cam,
+                suction,
+                float(cfg.hand.cup_offset),
+            )
+        ):
             hl = dataclasses.replace(hl, grasp_class=GraspClass.NG, reason="hold")
         final, reason = hl.grasp_class, hl.reason or ""
         if robot is not None and final != GraspClass.NG:
             box = scene.boxes[s.instance - 1]
             final, reason = robot_level_class(
-                hl, lambda h: robot.check(s, h, cfg.hand),
-                lambda h: suction is None or pattern_holds(
-                    s, h, box, scene.T_world_cam, suction, float(cfg.hand.cup_offset)),
-                single_cup_order(s, hl, cfg.hand) if bool(cfg.label.single_cup_fallback)
-                else ())
+                hl,
+                lambda h, s=s: robot.check(s, h, cfg.hand),
+                lambda h, s=s, box=box: (
+                    suction is None
+                    or pattern_holds(
+                        s, h, box, scene.T_world_cam, suction, float(cfg.hand.cup_offset)
+                    )
+                ),
+                single_cup_order(s, hl, cfg.hand) if bool(cfg.label.single_cup_fallback) else (),
+            )
         rows.append((s, hl, final, reason))
     t2 = time.perf_counter()
 

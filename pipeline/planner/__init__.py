@@ -3,16 +3,43 @@
 from pipeline.planner.decode import GraspPrediction, decode_output
 from pipeline.planner.loss import LossConfig, focal_terms, grasp_loss
 from pipeline.planner.network import (
-    GraspNet, NetworkConfig, conv_layers, count_flops, count_parameters, split_output,
+    GraspNet,
+    NetworkConfig,
+    conv_layers,
+    count_flops,
+    count_parameters,
+    split_output,
 )
 from pipeline.planner.ranking import (
-    GraspCandidate, RankingConfig, graspability, inclination, rank_grasps, surface_normal,
+    GraspCandidate,
+    RankingConfig,
+    graspability,
+    inclination,
+    rank_grasps,
+    surface_normal,
 )
 from pipeline.planner.targets import EMPTY, decode_points, encode, stack_targets
 
 __all__ = [
-    "EMPTY", "GraspCandidate", "GraspNet", "GraspPrediction", "LossConfig", "NetworkConfig",
-    "RankingConfig", "conv_layers", "count_flops", "count_parameters", "decode_output",
-    "decode_points", "encode", "focal_terms", "grasp_loss", "graspability", "inclination",
-    "rank_grasps", "split_output", "stack_targets", "surface_normal",
+    "EMPTY",
+    "GraspCandidate",
+    "GraspNet",
+    "GraspPrediction",
+    "LossConfig",
+    "NetworkConfig",
+    "RankingConfig",
+    "conv_layers",
+    "count_flops",
+    "count_parameters",
+    "decode_output",
+    "decode_points",
+    "encode",
+    "focal_terms",
+    "grasp_loss",
+    "graspability",
+    "inclination",
+    "rank_grasps",
+    "split_output",
+    "stack_targets",
+    "surface_normal",
 ]

@@ -2,7 +2,7 @@
 
 A mirrored depth image is the image of the mirrored heap, so its labels are the labelling
 rules applied to the mirrored surfaces. Mirroring changes only the L/R choice
-(``pipeline.labelling.hand``): B and NG are decided by surface sizes, which a mirror keeps.
+(``pipeline.grasping.hand``): B and NG are decided by surface sizes, which a mirror keeps.
 
 Which flips swap L and R. The hand's X is aligned with a surface axis rotated the *smaller* way
 onto camera X, its Y (the line of the two cups) is Z × X, and L/R is chosen by comparing the
@@ -38,26 +38,36 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.camera.geometry import Intrinsics
-from pipeline.labelling.types import GraspClass
+from pipeline.grasping.types import GraspClass
 from pipeline.robot.target_pose import target_camera_pose
 
 FLIPS = ("none", "u", "v", "uv")
 _AXIS = {"u": 0, "v": 1}  # pixel axis u ↔ camera x, v ↔ camera y
 
 
-def lr_choice(center_cam: np.ndarray, normal_cam: np.ndarray, x_axis_cam: np.ndarray,
-              standoff: float, cup_offset: float, tie_tolerance: float) -> GraspClass:
+def lr_choice(
+    center_cam: np.ndarray,
+    normal_cam: np.ndarray,
+    x_axis_cam: np.ndarray,
+    standoff: float,
+    cup_offset: float,
+    tie_tolerance: float,
+) -> GraspClass:
     """The hand-level rule between L and R (``hand.hand_label`` step 4): R when its camera
     centre is higher (smaller z) by more than ``tie_tolerance``, else L (ties go to L)."""
-    z_l, z_r = (target_camera_pose(center_cam, normal_cam, x_axis_cam, p, standoff=standoff,
-                                   cup_offset=cup_offset)[2, 3] for p in ("L", "R"))
+    z_l, z_r = (
+        target_camera_pose(
+            center_cam, normal_cam, x_axis_cam, p, standoff=standoff, cup_offset=cup_offset
+        )[2, 3]
+        for p in ("L", "R")
+    )
     return GraspClass.R if z_r < z_l - tie_tolerance else GraspClass.L
 
 
 def _mirror_x_axis(x_axis: np.ndarray, normal: np.ndarray, axis: int) -> np.ndarray:
     """The hand X the labelling rule picks for the mirrored surface: the mirrored axis, signed
     like ``hand.hand_label`` does (the warped view's x component ≥ 0)."""
-    from pipeline.labelling.hand import rotation_between
+    from pipeline.grasping.hand import rotation_between
 
     m = np.ones(3)
     m[axis] = -1.0
@@ -66,8 +76,9 @@ def _mirror_x_axis(x_axis: np.ndarray, normal: np.ndarray, axis: int) -> np.ndar
     return a if (R0.T @ a)[0] >= 0 else -a
 
 
-def flip_rows(rows: dict[str, np.ndarray], flip: str, intrinsics: Intrinsics,
-              hand) -> dict[str, np.ndarray]:
+def flip_rows(
+    rows: dict[str, np.ndarray], flip: str, intrinsics: Intrinsics, hand
+) -> dict[str, np.ndarray]:
     """One image's label rows mirrored by ``flip`` ("u", "v", "uv" or "none").
 
     Args:
@@ -90,20 +101,29 @@ def flip_rows(rows: dict[str, np.ndarray], flip: str, intrinsics: Intrinsics,
     for name in flip:
         axis = _AXIS[name]
         if abs(principal[axis] - (size[axis] - 1) / 2) > 1e-6:
-            raise ValueError(f"a {name}-flip mirrors the camera only when the principal point is "
-                             f"the image centre; got c = {principal[axis]} for size {size[axis]}")
+            raise ValueError(
+                f"a {name}-flip mirrors the camera only when the principal point is "
+                f"the image centre; got c = {principal[axis]} for size {size[axis]}"
+            )
         out["uv"][:, axis] = (size[axis] - 1) - out["uv"][:, axis]
         for i in range(len(out["uv"])):
-            out["x_axis_cam"][i] = _mirror_x_axis(out["x_axis_cam"][i].astype(np.float64),
-                                                  out["normal_cam"][i].astype(np.float64), axis)
+            out["x_axis_cam"][i] = _mirror_x_axis(
+                out["x_axis_cam"][i].astype(np.float64),
+                out["normal_cam"][i].astype(np.float64),
+                axis,
+            )
         out["center_cam"][:, axis] *= -1
         out["normal_cam"][:, axis] *= -1
     cls = out["grasp_class"]
     for i in np.nonzero((cls == GraspClass.L) | (cls == GraspClass.R))[0]:
-        cls[i] = lr_choice(out["center_cam"][i].astype(np.float64),
-                           out["normal_cam"][i].astype(np.float64),
-                           out["x_axis_cam"][i].astype(np.float64),
-                           hand.standoff, hand.cup_offset, hand.tie_tolerance)
+        cls[i] = lr_choice(
+            out["center_cam"][i].astype(np.float64),
+            out["normal_cam"][i].astype(np.float64),
+            out["x_axis_cam"][i].astype(np.float64),
+            hand.standoff,
+            hand.cup_offset,
+            hand.tie_tolerance,
+        )
     return out
 
 

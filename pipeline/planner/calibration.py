@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.labelling.types import GraspClass
+from pipeline.grasping.types import GraspClass
 from pipeline.planner.evaluate import ImagePredictions, match_image
 
 # An image here is an ``ImagePredictions`` whose rows are the planner's candidates at the grid's
@@ -67,7 +67,9 @@ def gopt_correct(img: ImagePredictions, threshold: float, radius_px: float) -> b
     return bool(np.any(near & (gt_cls == int(np.asarray(img.classes).reshape(-1)[k]))))
 
 
-def threshold_curve(images: list[ImagePredictions], grid: list[float], radius_px: float) -> list[dict]:
+def threshold_curve(
+    images: list[ImagePredictions], grid: list[float], radius_px: float
+) -> list[dict]:
     """One row per th of ``grid``: ``threshold``, ``gopt_accuracy`` (share of scored images whose
     G_opt is correct), ``no_candidate`` (share of scored images with nothing above th),
     ``precision``, ``recall``, ``f1`` (pooled detections above th on every image),
@@ -86,29 +88,46 @@ def threshold_curve(images: list[ImagePredictions], grid: list[float], radius_px
             sel = probs > th
             if not sel.any():
                 continue
-            matched = match_image(ImagePredictions(
-                uv=np.asarray(img.uv, np.float64).reshape(-1, 2)[sel],
-                classes=np.asarray(img.classes).reshape(-1)[sel], scores=probs[sel],
-                gt_uv=img.gt_uv, gt_classes=img.gt_classes), radius_px)
+            matched = match_image(
+                ImagePredictions(
+                    uv=np.asarray(img.uv, np.float64).reshape(-1, 2)[sel],
+                    classes=np.asarray(img.classes).reshape(-1)[sel],
+                    scores=probs[sel],
+                    gt_uv=img.gt_uv,
+                    gt_classes=img.gt_classes,
+                ),
+                radius_px,
+            )
             hits += int(matched.sum())
             taken += int(sel.sum())
         precision = hits / taken if taken else None
         recall = hits / num_gt if num_gt else None
-        f1 = (2 * precision * recall / (precision + recall)
-              if precision is not None and recall is not None and precision + recall > 0
-              else 0.0)
+        f1 = (
+            2 * precision * recall / (precision + recall)
+            if precision is not None and recall is not None and precision + recall > 0
+            else 0.0
+        )
         n = len(scored)
-        rows.append({"threshold": th,
-                     "gopt_accuracy": float(np.mean(correct)) if n else None,
-                     "no_candidate": float(np.mean(empty)) if n else None,
-                     "precision": precision, "recall": recall, "f1": f1, "scored_images": n})
+        rows.append(
+            {
+                "threshold": th,
+                "gopt_accuracy": float(np.mean(correct)) if n else None,
+                "no_candidate": float(np.mean(empty)) if n else None,
+                "precision": precision,
+                "recall": recall,
+                "f1": f1,
+                "scored_images": n,
+            }
+        )
     return rows
 
 
 def choose_threshold(curve: list[dict]) -> float:
     """th of the row with the largest ``f1``; among equal ones the lowest th."""
     if not any(r["recall"] is not None for r in curve):
-        raise ValueError("threshold calibration has no validation image with a graspable label "
-                         "point: generate more validation scenes (generate.num_val_scenes)")
+        raise ValueError(
+            "threshold calibration has no validation image with a graspable label "
+            "point: generate more validation scenes (generate.num_val_scenes)"
+        )
     best = max(r["f1"] for r in curve)
     return min(r["threshold"] for r in curve if r["f1"] == best)

@@ -4,7 +4,7 @@ centre of a real surface.
 Definition (the paper's, made exact here and printed in the report):
 
 * **Truth.** The centres of the *true* visible box faces of the image, from the simulator's box
-  poses and instance mask (``pipeline.labelling.surfaces.true_visible_faces``, faces with at
+  poses and instance mask (``pipeline.grasping.surfaces.true_visible_faces``, faces with at
   least ``surfaces.truth_min_visible_px`` visible pixels): the centre of each face's visible
   region, projected to pixels. Not the labelling stage's detected surfaces.
 * **Distance.** For each test image, the pixel distance from the planner's optimal grasp point

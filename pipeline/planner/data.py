@@ -77,8 +77,9 @@ class DepthShards:
             raise IndexError(f"image {i} out of range ({self._len} images)")
         k = int(np.searchsorted(self._starts, i, side="right") - 1)
         row, pixels = i - int(self._starts[k]), self.shape[0] * self.shape[1]
-        out = np.fromfile(self._files[k], dtype="<u2", count=pixels,
-                          offset=self._offsets[k] + 2 * pixels * row)
+        out = np.fromfile(
+            self._files[k], dtype="<u2", count=pixels, offset=self._offsets[k] + 2 * pixels * row
+        )
         if out.size != pixels:
             raise ValueError(f"{self._files[k]} is truncated; delete {self.cache_dir} and rerun")
         return out.reshape(self.shape)
@@ -88,12 +89,16 @@ def _npy_data_offset(path: Path, shape: tuple[int, int]) -> int:
     """Byte offset of the array data in an ``.npy`` file, after checking dtype and shape."""
     with open(path, "rb") as f:
         version = np.lib.format.read_magic(f)
-        header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
-                  else np.lib.format.read_array_header_2_0)(f)
+        header = (
+            np.lib.format.read_array_header_1_0
+            if version == (1, 0)
+            else np.lib.format.read_array_header_2_0
+        )(f)
         array_shape, fortran, dtype = header
         if fortran or dtype != np.dtype("<u2") or tuple(array_shape[1:]) != tuple(shape):
-            raise ValueError(f"{path} is not a depth cache file of {shape} uint16 images; "
-                             f"delete it and rerun")
+            raise ValueError(
+                f"{path} is not a depth cache file of {shape} uint16 images; delete it and rerun"
+            )
         return f.tell()
 
 
@@ -111,16 +116,30 @@ class GraspDataset(torch.utils.data.Dataset):
     ``lost_points`` / ``total_points``: points dropped by the one-point-per-cell rule.
     """
 
-    def __init__(self, gen_dir: Path, labels, split: str, norm: Normalisation, grid: int,
-                 hand_cfg=None, limit: int = 0, cache_dir: Path | None = None) -> None:
+    def __init__(
+        self,
+        gen_dir: Path,
+        labels,
+        split: str,
+        norm: Normalisation,
+        grid: int,
+        hand_cfg=None,
+        limit: int = 0,
+        cache_dir: Path | None = None,
+    ) -> None:
         gen_dir = Path(gen_dir)
-        cache_dir = Path(cache_dir) if cache_dir is not None else (
-            gen_dir.parent.parent / ".cache" / "depth" / gen_dir.name)
+        cache_dir = (
+            Path(cache_dir)
+            if cache_dir is not None
+            else (gen_dir.parent.parent / ".cache" / "depth" / gen_dir.name)
+        )
         self.depth = DepthShards(gen_dir, split, cache_dir, limit)
         n = len(self.depth)
         if len(labels) < n:
-            raise ValueError(f"the label artifact has {len(labels)} {split} images, the "
-                             f"generation artifact {n}: they do not belong together")
+            raise ValueError(
+                f"the label artifact has {len(labels)} {split} images, the "
+                f"generation artifact {n}: they do not belong together"
+            )
         self.intrinsics = self.depth.intrinsics
         self.depth_unit = self.depth.depth_unit
         self.norm, self.grid, self.hand_cfg = norm, grid, hand_cfg
@@ -146,52 +165,68 @@ class GraspDataset(torch.utils.data.Dataset):
         if flip != "none":
             depth = flip_image(depth, flip)
             rows = flip_rows(rows, flip, self.intrinsics, self.hand_cfg)
-        return (normalise_depth(depth, self.norm),
-                encode(rows["uv"], rows["grasp_class"], self.grid, depth.shape[1]))
+        return (
+            normalise_depth(depth, self.norm),
+            encode(rows["uv"], rows["grasp_class"], self.grid, depth.shape[1]),
+        )
 
     @staticmethod
     def collate(items) -> tuple[torch.Tensor, dict]:
         """[(x (H, W), targets), ...] → (x (B, 1, H, W) float32, ``stack_targets`` batch)."""
-        return (torch.from_numpy(np.stack([x for x, _ in items])[:, None]),
-                stack_targets([t for _, t in items]))
+        return (
+            torch.from_numpy(np.stack([x for x, _ in items])[:, None]),
+            stack_targets([t for _, t in items]),
+        )
 
     def batch(self, indices, flips=None) -> tuple[torch.Tensor, dict]:
         flips = flips if flips is not None else ["none"] * len(indices)
         return self.collate([self[(int(i), f)] for i, f in zip(indices, flips)])
 
 
-def make_loader(data: GraspDataset, batches: list[list[tuple[int, str]]], workers: int,
-                prefetch: int = 4) -> torch.utils.data.DataLoader:
+def make_loader(
+    data: GraspDataset, batches: list[list[tuple[int, str]]], workers: int, prefetch: int = 4
+) -> torch.utils.data.DataLoader:
     """Batches of ``data`` in the given order (each a list of (index, flip)), decoded by
     ``workers`` processes (0 = in this process). The order, hence the result, does not depend on
     ``workers``."""
     kwargs = {"prefetch_factor": prefetch} if workers > 0 else {}
     # Its own generator: creating the loader's iterator draws a seed, and drawing it from
     # torch's global generator would change the random stream the training sees.
-    return torch.utils.data.DataLoader(data, batch_sampler=batches, collate_fn=data.collate,
-                                       num_workers=workers,
-                                       generator=torch.Generator().manual_seed(0), **kwargs)
+    return torch.utils.data.DataLoader(
+        data,
+        batch_sampler=batches,
+        collate_fn=data.collate,
+        num_workers=workers,
+        generator=torch.Generator().manual_seed(0),
+        **kwargs,
+    )
 
 
 def epoch_order(n: int, seed: int, epoch: int, flip: str) -> tuple[list[int], list[str]]:
     """Epoch ``epoch``'s image order and per-image flips, from (seed, epoch) only."""
     gen = torch.Generator().manual_seed(seed * 1_000_003 + epoch)
     order = torch.randperm(n, generator=gen).tolist()
-    choices = {"none": ["none"], "u": ["none", "u"], "v": ["none", "v"],
-               "uv": ["none", "u", "v", "uv"]}[flip]
+    choices = {
+        "none": ["none"],
+        "u": ["none", "u"],
+        "v": ["none", "v"],
+        "uv": ["none", "u", "v", "uv"],
+    }[flip]
     picks = torch.randint(len(choices), (n,), generator=gen).tolist()
     return order, [choices[k] for k in picks]
 
 
-def epoch_batches(n: int, batch: int, seed: int, epoch: int, flip: str,
-                   ctx: DistContext) -> tuple[list[list[tuple[int, str]]], list[float]]:
+def epoch_batches(
+    n: int, batch: int, seed: int, epoch: int, flip: str, ctx: DistContext
+) -> tuple[list[list[tuple[int, str]]], list[float]]:
     """Epoch ``epoch``'s batches for this rank, as (index, flip) lists, and their loss weights
     (``distributed.split_batch``; one process: the whole batches, weight 1)."""
     order, flips = epoch_order(n, seed, epoch, flip)
     batches, weights = [], []
     for start in range(0, n, batch):
-        idx, fl, w = distributed.split_batch(order[start:start + batch],
-                                             flips[start:start + batch], ctx.rank, ctx.world_size)
+        idx, fl, w = distributed.split_batch(
+            order[start : start + batch], flips[start : start + batch], ctx.rank, ctx.world_size
+        )
         batches.append(list(zip(idx, fl)))
         weights.append(w)
     return batches, weights

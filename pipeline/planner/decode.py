@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from pipeline.labelling.types import GraspClass
+from pipeline.grasping.types import GraspClass
 from pipeline.planner.network import split_output
 
 
@@ -23,8 +23,9 @@ class GraspPrediction:
     class_probs: np.ndarray
 
 
-def decode_output(raw: torch.Tensor, threshold: float = 0.0,
-                  image_size: int = 416) -> list[GraspPrediction]:
+def decode_output(
+    raw: torch.Tensor, threshold: float = 0.0, image_size: int = 416
+) -> list[GraspPrediction]:
     """One image's output (2 + C, N, N) → the cells whose max class probability > ``threshold``
     (Eq. 3), in row-major cell order. NG points are kept (ranking drops them)."""
     if raw.ndim != 3:
@@ -37,16 +38,21 @@ def decode_output(raw: torch.Tensor, threshold: float = 0.0,
     best_p = probs.max(-1)  # (N, N)
     out = []
     for jv, ju in zip(*np.nonzero(best_p > threshold)):
-        out.append(GraspPrediction(
-            u=float((ju + offset[jv, ju, 0]) * cell_px),
-            v=float((jv + offset[jv, ju, 1]) * cell_px),
-            grasp_class=GraspClass(int(best[jv, ju])), probability=float(best_p[jv, ju]),
-            class_probs=probs[jv, ju].copy()))
+        out.append(
+            GraspPrediction(
+                u=float((ju + offset[jv, ju, 0]) * cell_px),
+                v=float((jv + offset[jv, ju, 1]) * cell_px),
+                grasp_class=GraspClass(int(best[jv, ju])),
+                probability=float(best_p[jv, ju]),
+                class_probs=probs[jv, ju].copy(),
+            )
+        )
     return out
 
 
-def second_chance(preds: list[GraspPrediction], threshold: float,
-                  fallback_threshold: float) -> list[GraspPrediction]:
+def second_chance(
+    preds: list[GraspPrediction], threshold: float, fallback_threshold: float
+) -> list[GraspPrediction]:
     """The cells that Eq. 3 at ``threshold`` drops (their most probable class is NG, or its
     probability is at most ``threshold``) but whose most probable class other than NG has a
     probability above ``fallback_threshold``, each as that class with that probability.
@@ -62,7 +68,13 @@ def second_chance(preds: list[GraspPrediction], threshold: float,
         probs[int(GraspClass.NG)] = -np.inf
         best = int(probs.argmax())
         if probs[best] > fallback_threshold:
-            out.append(GraspPrediction(u=p.u, v=p.v, grasp_class=GraspClass(best),
-                                       probability=float(probs[best]),
-                                       class_probs=p.class_probs))
+            out.append(
+                GraspPrediction(
+                    u=p.u,
+                    v=p.v,
+                    grasp_class=GraspClass(best),
+                    probability=float(probs[best]),
+                    class_probs=p.class_probs,
+                )
+            )
     return out

@@ -1,13 +1,14 @@
 """Data-parallel training across processes (``torchrun`` + ``DistributedDataParallel``).
 
-    torchrun --standalone --nproc_per_node=2 -m pipeline.train experiment=default   # make train NPROC=2
+    # make train NPROC=2:
+    torchrun --standalone --nproc_per_node=2 -m pipeline.stages.train experiment=default
 
 ``torchrun`` sets ``RANK``, ``WORLD_SIZE``, ``LOCAL_RANK`` and the rendezvous; without them
 training runs in one process, exactly as before. Backend: ``nccl`` on CUDA (one GPU per
 process, ``cuda:<LOCAL_RANK>``), ``gloo`` on CPUs.
 
 What stays the same as one process: the global batch (``train.batch_size`` images) and every
-epoch's image order and flips (``pipeline.train.epoch_order``). Each global batch is split
+epoch's image order and flips (``pipeline.stages.train.epoch_order``). Each global batch is split
 into ``W`` contiguous parts, rank r takes part r (``split_batch``), and its loss is weighted
 by ``W·n_r/n`` so that DDP's gradient average equals the gradient of the mean loss over the
 whole batch. Every image of the epoch is seen exactly once, by one rank.
@@ -52,9 +53,12 @@ def from_env() -> DistContext:
     world = int(os.environ.get("WORLD_SIZE", "1"))
     if world <= 1:
         return DistContext()
-    return DistContext(rank=int(os.environ["RANK"]), world_size=world,
-                       local_rank=int(os.environ.get("LOCAL_RANK", "0")),
-                       local_world_size=int(os.environ.get("LOCAL_WORLD_SIZE", str(world))))
+    return DistContext(
+        rank=int(os.environ["RANK"]),
+        world_size=world,
+        local_rank=int(os.environ.get("LOCAL_RANK", "0")),
+        local_world_size=int(os.environ.get("LOCAL_WORLD_SIZE", str(world))),
+    )
 
 
 def init(ctx: DistContext, device: torch.device) -> torch.device:
@@ -66,8 +70,9 @@ def init(ctx: DistContext, device: torch.device) -> torch.device:
         device = torch.device("cuda", ctx.local_rank)
     if not dist.is_initialized():
         # Long timeout: rank 0 alone computes the validation loss between epochs.
-        dist.init_process_group("nccl" if device.type == "cuda" else "gloo",
-                                timeout=datetime.timedelta(hours=2))
+        dist.init_process_group(
+            "nccl" if device.type == "cuda" else "gloo", timeout=datetime.timedelta(hours=2)
+        )
     return device
 
 
@@ -90,8 +95,9 @@ def barrier(ctx: DistContext) -> None:
         dist.barrier()
 
 
-def split_batch(indices: list[int], flips: list[str], rank: int,
-                world_size: int) -> tuple[list[int], list[str], float]:
+def split_batch(
+    indices: list[int], flips: list[str], rank: int, world_size: int
+) -> tuple[list[int], list[str], float]:
     """Rank ``rank``'s part of one global batch and its loss weight ``W·n_r/n``.
 
     Parts are contiguous and as equal as possible (``[0, 1, 2, 3, 4]`` over 2 ranks:
@@ -110,8 +116,9 @@ def split_batch(indices: list[int], flips: list[str], rank: int,
     return list(indices[start:stop]), list(flips[start:stop]), world_size * (stop - start) / n
 
 
-def all_mean(ctx: DistContext, values: list[float], weight: float,
-             device: torch.device | None = None) -> list[float]:
+def all_mean(
+    ctx: DistContext, values: list[float], weight: float, device: torch.device | None = None
+) -> list[float]:
     """``Σ_r weight_r · values_r / W`` over ranks: with the weights of ``split_batch`` the
     batch-mean of per-image values, as one process would compute it."""
     if not ctx.active:

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.labelling.types import GraspClass
+from pipeline.grasping.types import GraspClass
 
 TOP_FRACTIONS = (0.01, 0.05, 0.10)
 PAPER_TABLE1 = {"top1": 0.8310, "top1pct": 0.8025, "top5pct": 0.6722, "top10pct": 0.5564}
@@ -83,8 +83,9 @@ def _pooled_top(scores: np.ndarray, correct: np.ndarray) -> dict:
     return out
 
 
-def precision_table(images: list[ImagePredictions], radius_px: float,
-                    threshold: float | None = None) -> dict:
+def precision_table(
+    images: list[ImagePredictions], radius_px: float, threshold: float | None = None
+) -> dict:
     """Table 1 and the precision–recall curve (see the module docstring).
 
     Args:
@@ -137,21 +138,33 @@ def precision_table(images: list[ImagePredictions], radius_px: float,
     scores = np.concatenate(all_scores) if all_scores else np.zeros(0)
     correct = np.concatenate(all_correct) if all_correct else np.zeros(0, bool)
     above = np.concatenate(above_flags) if above_flags else np.zeros(0, bool)
-    out = {"threshold": None if threshold is None else float(threshold),
-           "top1": float(np.mean(top1)) if top1 else None,
-           **_pooled_top(scores[above], correct[above]),
-           "per_image": {f"top{round(f * 100)}pct": (float(np.mean(v)) if v else None)
-                         for f, v in per_image.items()},
-           "legacy": {"top1": float(np.mean(legacy_top1)) if legacy_top1 else None,
-                      **_pooled_top(scores, correct)},
-           "num_predictions": int(above.sum()), "num_ground_truth": num_gt,
-           "num_images": len(images), "scored_images": len(top1),
-           "no_prediction_images": no_prediction, "radius_px": float(radius_px)}
+    out = {
+        "threshold": None if threshold is None else float(threshold),
+        "top1": float(np.mean(top1)) if top1 else None,
+        **_pooled_top(scores[above], correct[above]),
+        "per_image": {
+            f"top{round(f * 100)}pct": (float(np.mean(v)) if v else None)
+            for f, v in per_image.items()
+        },
+        "legacy": {
+            "top1": float(np.mean(legacy_top1)) if legacy_top1 else None,
+            **_pooled_top(scores, correct),
+        },
+        "num_predictions": int(above.sum()),
+        "num_ground_truth": num_gt,
+        "num_images": len(images),
+        "scored_images": len(top1),
+        "no_prediction_images": no_prediction,
+        "radius_px": float(radius_px),
+    }
     order = np.argsort(-scores, kind="stable")
     hits = np.cumsum(correct[order])
     taken = np.arange(1, len(correct) + 1)
-    out["pr_curve"] = {"precision": hits / np.maximum(taken, 1),
-                       "recall": hits / max(num_gt, 1), "score": scores[order]}
+    out["pr_curve"] = {
+        "precision": hits / np.maximum(taken, 1),
+        "recall": hits / max(num_gt, 1),
+        "score": scores[order],
+    }
     return out
 
 

@@ -50,8 +50,9 @@ def loss_config(cfg) -> LossConfig:
     return from_section(LossConfig, cfg.train)
 
 
-def focal_terms(logits: torch.Tensor, targets: torch.Tensor, alpha: float,
-                gamma: float) -> torch.Tensor:
+def focal_terms(
+    logits: torch.Tensor, targets: torch.Tensor, alpha: float, gamma: float
+) -> torch.Tensor:
     """Eq. 6's summand per element, from logits x (any shape) and 0/1 targets (same shape).
 
     log p = logsigmoid(x) and log(1 − p) = logsigmoid(−x) stay finite for any x, and
@@ -63,8 +64,9 @@ def focal_terms(logits: torch.Tensor, targets: torch.Tensor, alpha: float,
     return torch.where(targets > 0.5, positive, negative)
 
 
-def grasp_loss(raw: torch.Tensor, targets: dict[str, torch.Tensor],
-               cfg: LossConfig) -> dict[str, torch.Tensor]:
+def grasp_loss(
+    raw: torch.Tensor, targets: dict[str, torch.Tensor], cfg: LossConfig
+) -> dict[str, torch.Tensor]:
     """Eqs. 4–6 for a batch.
 
     Args:
@@ -82,8 +84,10 @@ def grasp_loss(raw: torch.Tensor, targets: dict[str, torch.Tensor],
     offset_true = targets["offset"].to(raw.device, raw.dtype)  # (B, N, N, 2)
     cls = targets["cls"].to(raw.device).long()  # (B, N, N)
     if obj.shape != class_logits.shape[:3]:
-        raise ValueError(f"targets are for grids {tuple(obj.shape)}, the network output is "
-                         f"{tuple(class_logits.shape[:3])}; encode with the network's grid")
+        raise ValueError(
+            f"targets are for grids {tuple(obj.shape)}, the network output is "
+            f"{tuple(class_logits.shape[:3])}; encode with the network's grid"
+        )
 
     num_points = obj.flatten(1).sum(1)  # (B,)
     norm = num_points.clamp(min=1).to(raw.dtype)  # (B,)
@@ -97,5 +101,9 @@ def grasp_loss(raw: torch.Tensor, targets: dict[str, torch.Tensor],
     class_ = focal_terms(class_logits, one_hot, cfg.alpha, cfg.gamma).flatten(1).sum(1) / norm
 
     total = cfg.lambda_coord * coord + cfg.lambda_class * class_  # (B,)
-    return {"total": total.mean(), "coord": coord.mean(), "class": class_.mean(),
-            "num_points": num_points}
+    return {
+        "total": total.mean(),
+        "coord": coord.mean(),
+        "class": class_.mean(),
+        "num_points": num_points,
+    }

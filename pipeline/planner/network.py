@@ -38,11 +38,23 @@ NUM_COORDS = 2  # (u, v) offset inside a cell
 # Darknet-19 without its classifier: (out_channels, kernel) per conv, "M" = 2×2 max-pool.
 # Split where the passthrough taps the stride-16 features.
 DARKNET19_TO_STRIDE16 = [
-    (32, 3), "M",
-    (64, 3), "M",
-    (128, 3), (64, 1), (128, 3), "M",
-    (256, 3), (128, 1), (256, 3), "M",
-    (512, 3), (256, 1), (512, 3), (256, 1), (512, 3),
+    (32, 3),
+    "M",
+    (64, 3),
+    "M",
+    (128, 3),
+    (64, 1),
+    (128, 3),
+    "M",
+    (256, 3),
+    (128, 1),
+    (256, 3),
+    "M",
+    (512, 3),
+    (256, 1),
+    (512, 3),
+    (256, 1),
+    (512, 3),
 ]
 DARKNET19_TO_STRIDE32 = ["M", (1024, 3), (512, 1), (1024, 3), (512, 1), (1024, 3)]
 HEAD_CHANNELS = 1024
@@ -66,8 +78,10 @@ class NetworkConfig:
 
     def __post_init__(self):
         if self.input_size != self.grid * 32:
-            raise ValueError(f"input_size {self.input_size} must be 32 × grid ({self.grid}) "
-                             f"= {32 * self.grid}: the backbone downsamples by 32")
+            raise ValueError(
+                f"input_size {self.input_size} must be 32 × grid ({self.grid}) "
+                f"= {32 * self.grid}: the backbone downsamples by 32"
+            )
         if self.width <= 0:
             raise ValueError(f"width must be > 0, got {self.width}")
 
@@ -116,8 +130,9 @@ class GraspNet(nn.Module):
         self.stage32, c, _ = self._stage(DARKNET19_TO_STRIDE32, c16, level)  # stride 32
 
         head = scaled(HEAD_CHANNELS, w)
-        self.head = nn.Sequential(ConvBlock(c, head, 3, slope, 5),
-                                  ConvBlock(head, head, 3, slope, 5))
+        self.head = nn.Sequential(
+            ConvBlock(c, head, 3, slope, 5), ConvBlock(head, head, 3, slope, 5)
+        )
         self.passthrough = ConvBlock(c16, scaled(PASSTHROUGH_CHANNELS, w), 1, slope, 4)
         c_cat = head + 4 * scaled(PASSTHROUGH_CHANNELS, w)  # space-to-depth ×4 channels
         self.fuse = ConvBlock(c_cat, head, 3, slope, 5)
@@ -134,8 +149,9 @@ class GraspNet(nn.Module):
                 level += 1
             else:
                 c_out, kernel = item
-                layers.append(ConvBlock(c, scaled(c_out, self.cfg.width), kernel,
-                                        self.cfg.leaky_slope, level))
+                layers.append(
+                    ConvBlock(c, scaled(c_out, self.cfg.width), kernel, self.cfg.leaky_slope, level)
+                )
                 c = scaled(c_out, self.cfg.width)
         return nn.Sequential(*layers), c, level
 

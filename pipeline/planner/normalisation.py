@@ -26,16 +26,22 @@ class Normalisation:
     missing_depth_value: float
 
     def as_dict(self) -> dict:
-        return {"d_ground": self.d_ground, "depth_scale": self.depth_scale,
-                "missing_depth_value": self.missing_depth_value}
+        return {
+            "d_ground": self.d_ground,
+            "depth_scale": self.depth_scale,
+            "missing_depth_value": self.missing_depth_value,
+        }
 
 
 def normalisation(cfg) -> Normalisation:
     """The network input's normalisation from a composed config: D_ground
     (``pipeline.camera.geometry.ground_distance``), ``train.depth_scale`` and
     ``train.missing_depth_value``."""
-    return Normalisation(ground_distance(cfg.camera, cfg.bin), float(cfg.train.depth_scale),
-                         float(cfg.train.missing_depth_value))
+    return Normalisation(
+        ground_distance(cfg.camera, cfg.bin),
+        float(cfg.train.depth_scale),
+        float(cfg.train.missing_depth_value),
+    )
 
 
 def normalise_depth(depth_m: np.ndarray, norm: Normalisation) -> np.ndarray:

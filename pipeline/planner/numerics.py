@@ -1,6 +1,6 @@
 """The numerical settings of training: deterministic kernels and full float32 on every device.
 
-The training stage and ``pipeline.bench_gpu`` (which measures what these settings cost and
+The training stage and ``pipeline.tools.bench_gpu`` (which measures what these settings cost and
 what they buy) call ``set_training_numerics``; it is the one place they are written.
 """
 

@@ -3,7 +3,7 @@
     planner = Planner.load("models/train/latest")
     candidates = planner.plan(depth_m, intrinsics)   # G_opt = candidates[0]
 
-``model.pt`` (written by ``pipeline.train``) holds the weights, the network config, the depth
+``model.pt`` (written by ``pipeline.stages.train``) holds the weights, the network config, the depth
 normalisation and the ranking config (th, D_ground), so a planner needs nothing else.
 
 **Bad input.** The depth image goes through ``pipeline.camera.depth_input.check_depth_image``:
@@ -25,8 +25,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import torch
@@ -35,16 +35,18 @@ from pipeline.camera.depth_filter import preprocess_depth
 from pipeline.camera.depth_input import check_depth_image
 from pipeline.camera.geometry import Intrinsics, ground_distance
 from pipeline.config.build import from_section
-from pipeline.labelling.types import GraspClass
-from pipeline.planner.normalisation import Normalisation, normalise_depth
+from pipeline.grasping.types import GraspClass
 from pipeline.planner.decode import decode_output, second_chance
 from pipeline.planner.network import GraspNet, NetworkConfig
+from pipeline.planner.normalisation import Normalisation, normalise_depth
 from pipeline.planner.ranking import GraspCandidate, RankingConfig, rank_grasps
 
 MODEL_FILE = "model.pt"
 MODEL_KEYS = ("state_dict", "network", "normalisation", "ranking")
-RETRAIN_FIX = ("retrain with `make train` (`python -m pipeline.train`), or pass a "
-               "models/train/<version> folder made by this version of the pipeline")
+RETRAIN_FIX = (
+    "retrain with `make train` (`python -m pipeline.stages.train`), or pass a "
+    "models/train/<version> folder made by this version of the pipeline"
+)
 
 # ``Planner.last_reason`` after a plan that returned no candidate.
 NO_VALID_DEPTH = "no_valid_depth"  # no pixel of the image has data (all NaN/inf/<= 0, ...)
@@ -68,56 +70,73 @@ def read_model_file(path: Path, keys: tuple[str, ...], what: str, fix: str) -> d
         # torch's first sentence only (its advice is about weights_only=False: not wanted here).
         first = (str(exc).strip().splitlines() or [""])[0].split(". ")[0][:160]
         first = first or "the file ends too early"
-        raise ModelFileError(f"{path} is not a readable {what} ({type(exc).__name__}: {first}); "
-                             f"the file may be truncated or not a model at all: {fix}") from None
+        raise ModelFileError(
+            f"{path} is not a readable {what} ({type(exc).__name__}: {first}); "
+            f"the file may be truncated or not a model at all: {fix}"
+        ) from None
     if not isinstance(blob, dict):
-        raise ModelFileError(f"{path} holds a {type(blob).__name__}, not a {what} (a dict with "
-                             f"keys {', '.join(keys)}): {fix}")
+        raise ModelFileError(
+            f"{path} holds a {type(blob).__name__}, not a {what} (a dict with "
+            f"keys {', '.join(keys)}): {fix}"
+        )
     missing = [k for k in keys if k not in blob]
     if missing:
-        raise ModelFileError(f"{path} is not a {what}: it lacks {', '.join(missing)} (has "
-                             f"{', '.join(map(str, blob)) or 'nothing'}; expected {', '.join(keys)}"
-                             f"): {fix}")
+        raise ModelFileError(
+            f"{path} is not a {what}: it lacks {', '.join(missing)} (has "
+            f"{', '.join(map(str, blob)) or 'nothing'}; expected {', '.join(keys)}"
+            f"): {fix}"
+        )
     return blob
 
 
-def build_from_blob(path: Path, fix: str, build: Callable[[], torch.nn.Module],
-                    state_dict) -> torch.nn.Module:
+def build_from_blob(
+    path: Path, fix: str, build: Callable[[], torch.nn.Module], state_dict
+) -> torch.nn.Module:
     """``build()`` the network a model file's config describes and load ``state_dict`` into it,
     checking first that the file's tensors are exactly the network's (names and shapes), so a
     mismatch is a ``ModelFileError`` that lists it rather than torch's long RuntimeError."""
     try:
         net = build()
     except (TypeError, ValueError, KeyError) as exc:
-        raise ModelFileError(f"{path}: its network config does not describe a network of this "
-                             f"version of the pipeline ({type(exc).__name__}: {exc}): "
-                             f"{fix}") from None
-    if not isinstance(state_dict, dict) or not all(isinstance(v, torch.Tensor)
-                                                   for v in state_dict.values()):
+        raise ModelFileError(
+            f"{path}: its network config does not describe a network of this "
+            f"version of the pipeline ({type(exc).__name__}: {exc}): "
+            f"{fix}"
+        ) from None
+    if not isinstance(state_dict, dict) or not all(
+        isinstance(v, torch.Tensor) for v in state_dict.values()
+    ):
         raise ModelFileError(f"{path}: state_dict is not a dict of tensors: {fix}")
     want = net.state_dict()
     missing = [k for k in want if k not in state_dict]
     unexpected = [k for k in state_dict if k not in want]
-    shapes = [f"{k}: file {tuple(state_dict[k].shape)}, network {tuple(want[k].shape)}"
-              for k in want if k in state_dict and state_dict[k].shape != want[k].shape]
+    shapes = [
+        f"{k}: file {tuple(state_dict[k].shape)}, network {tuple(want[k].shape)}"
+        for k in want
+        if k in state_dict and state_dict[k].shape != want[k].shape
+    ]
     problems = []
     if missing:
         problems.append(f"{len(missing)} tensor(s) missing (e.g. {', '.join(missing[:3])})")
     if unexpected:
-        problems.append(f"{len(unexpected)} unexpected tensor(s) (e.g. "
-                        f"{', '.join(unexpected[:3])})")
+        problems.append(
+            f"{len(unexpected)} unexpected tensor(s) (e.g. {', '.join(unexpected[:3])})"
+        )
     if shapes:
         problems.append(f"{len(shapes)} tensor(s) of another shape (e.g. {'; '.join(shapes[:2])})")
     if problems:
         cfg = getattr(net, "cfg", None)
-        raise ModelFileError(f"{path}: its weights do not fit the network its config describes "
-                             f"({cfg}): {', '.join(problems)}; the file comes from an "
-                             f"incompatible network or another version: {fix}")
+        raise ModelFileError(
+            f"{path}: its weights do not fit the network its config describes "
+            f"({cfg}): {', '.join(problems)}; the file comes from an "
+            f"incompatible network or another version: {fix}"
+        )
     try:
         net.load_state_dict(state_dict)
     except RuntimeError as exc:  # e.g. dtypes torch cannot copy
-        raise ModelFileError(f"{path}: its weights cannot be loaded ({str(exc)[:200]}): "
-                             f"{fix}") from None
+        raise ModelFileError(
+            f"{path}: its weights cannot be loaded ({str(exc)[:200]}): {fix}"
+        ) from None
     return net
 
 
@@ -132,8 +151,13 @@ def pick_device(requested: str = "auto") -> torch.device:
 class Planner:
     """A trained network plus decoding (Eq. 3) and ranking (Eqs. 7–10)."""
 
-    def __init__(self, net: GraspNet, norm: Normalisation, ranking: RankingConfig,
-                 device: str | torch.device = "cpu") -> None:
+    def __init__(
+        self,
+        net: GraspNet,
+        norm: Normalisation,
+        ranking: RankingConfig,
+        device: str | torch.device = "cpu",
+    ) -> None:
         self.device = pick_device(device) if isinstance(device, str) else device
         self.net = net.to(self.device).eval()
         self.norm, self.ranking = norm, ranking
@@ -143,31 +167,43 @@ class Planner:
         self.depth_filter = None
 
     @classmethod
-    def load(cls, model_dir: Path | str, device: str = "cpu") -> "Planner":
+    def load(cls, model_dir: Path | str, device: str = "cpu") -> Planner:
         """From a training artifact folder (or a ``model.pt`` path)."""
         path = Path(model_dir)
         path = path / MODEL_FILE if path.is_dir() else path
         if not path.is_file():
-            raise FileNotFoundError(f"{path} not found: give a training artifact folder "
-                                    "(models/train/<version>) made by `python -m pipeline.train`")
-        what = "grasp planner model (model.pt of `python -m pipeline.train`)"
+            raise FileNotFoundError(
+                f"{path} not found: give a training artifact folder "
+                "(models/train/<version>) made by `python -m pipeline.stages.train`"
+            )
+        what = "grasp planner model (model.pt of `python -m pipeline.stages.train`)"
         blob = read_model_file(path, MODEL_KEYS, what, RETRAIN_FIX)
-        net = build_from_blob(path, RETRAIN_FIX,
-                              lambda: GraspNet(NetworkConfig(**blob["network"])),
-                              blob["state_dict"])
+        net = build_from_blob(
+            path,
+            RETRAIN_FIX,
+            lambda: GraspNet(NetworkConfig(**blob["network"])),
+            blob["state_dict"],
+        )
         try:
             norm = Normalisation(**blob["normalisation"])
             ranking = RankingConfig(**blob["ranking"])
         except TypeError as exc:
-            raise ModelFileError(f"{path}: its normalisation/ranking config does not fit this "
-                                 f"version of the pipeline ({exc}): {RETRAIN_FIX}") from None
+            raise ModelFileError(
+                f"{path}: its normalisation/ranking config does not fit this "
+                f"version of the pipeline ({exc}): {RETRAIN_FIX}"
+            ) from None
         return cls(net, norm, ranking, device)
 
     def _check(self, depth_m: np.ndarray, batch: bool = True) -> np.ndarray:
         """``check_depth_image``: (…, S, S) (or (S, S) without ``batch``) → float32 metres,
         0 = no data (NaN, inf, ≤ 0, implausible depths)."""
-        return check_depth_image(depth_m, (self.size, self.size), allow_batch=batch,
-                                 name="depth_m", shape_source="the network's input size")
+        return check_depth_image(
+            depth_m,
+            (self.size, self.size),
+            allow_batch=batch,
+            name="depth_m",
+            shape_source="the network's input size",
+        )
 
     @torch.no_grad()
     def predict(self, depth_m: np.ndarray) -> torch.Tensor:
@@ -183,12 +219,14 @@ class Planner:
         x = torch.from_numpy(normalise_depth(batch, self.norm)).to(self.device)
         return self.net(x).float().cpu()
 
-    def plan(self, depth_m: np.ndarray, intrinsics: Intrinsics,
-             fallback_threshold: float | None = None) -> list[GraspCandidate]:
+    def plan(
+        self, depth_m: np.ndarray, intrinsics: Intrinsics, fallback_threshold: float | None = None
+    ) -> list[GraspCandidate]:
         """One (H, W) depth image, metres → candidates sorted by J (Eq. 7), G_opt first.
 
         ``fallback_threshold`` (not the paper; ``evaluate.dcnn_fallback_ratio`` in the closed
-        loop): when given and below th, the candidates of Eq. 3 are followed by a second tier, sorted
+        loop): when given and below th, the candidates of Eq. 3 are followed by a second tier,
+        sorted
         by J among themselves: the cells Eq. 3 drops whose most probable class other than NG
         has a probability above it (``decode.second_chance``), as that class. A caller that
         executes the first candidate a check accepts thus reaches the second tier only when
@@ -205,9 +243,11 @@ class Planner:
         """
         depth_m = preprocess_depth(self._check(depth_m, batch=False), self.depth_filter)
         if (intrinsics.height, intrinsics.width) != depth_m.shape:
-            raise ValueError(f"intrinsics are for {intrinsics.width} x {intrinsics.height} "
-                             f"images, the depth image is {depth_m.shape[1]} x "
-                             f"{depth_m.shape[0]}: pass the intrinsics of this image")
+            raise ValueError(
+                f"intrinsics are for {intrinsics.width} x {intrinsics.height} "
+                f"images, the depth image is {depth_m.shape[1]} x "
+                f"{depth_m.shape[0]}: pass the intrinsics of this image"
+            )
         self.last_reason = ""
         if not (depth_m > 0).any():
             self.last_reason = NO_VALID_DEPTH
@@ -222,15 +262,21 @@ class Planner:
         first = [p for p in preds if p.probability > th and p.grasp_class != GraspClass.NG]
         tiers = [(first, self.ranking)]
         if second:
-            tiers.append((second_chance(preds, th, floor),
-                          dataclasses.replace(self.ranking, threshold=floor)))
+            tiers.append(
+                (
+                    second_chance(preds, th, floor),
+                    dataclasses.replace(self.ranking, threshold=floor),
+                )
+            )
         if not any(preds for preds, _ in tiers):
             self.last_reason = NO_PREDICTION
             return []
-        ranked = [dataclasses.replace(c, second_tier=tier > 0)
-                  for tier, (preds, ranking) in enumerate(tiers)
-                  for c in rank_grasps(preds, depth_m, intrinsics, ranking)
-                  if _has_data(depth_m, c.u, c.v)]
+        ranked = [
+            dataclasses.replace(c, second_tier=tier > 0)
+            for tier, (preds, ranking) in enumerate(tiers)
+            for c in rank_grasps(preds, depth_m, intrinsics, ranking)
+            if _has_data(depth_m, c.u, c.v)
+        ]
         if not ranked:
             self.last_reason = NO_RANKABLE_CANDIDATE
         return ranked
@@ -248,10 +294,14 @@ def ranking_config(cfg, threshold: float) -> RankingConfig:
     ``pipeline.planner.calibration``) and D_ground (``pipeline.camera.geometry.ground_distance``,
     Eq. 9)."""
     r = cfg.train.ranking
-    return from_section(RankingConfig, r, d_ground=ground_distance(cfg.camera, cfg.bin),
-                        threshold=float(threshold),
-                        phi_switch=math.radians(float(r.phi_switch_deg)),
-                        inclination_tie=math.radians(float(r.inclination_tie_deg)))
+    return from_section(
+        RankingConfig,
+        r,
+        d_ground=ground_distance(cfg.camera, cfg.bin),
+        threshold=float(threshold),
+        phi_switch=math.radians(float(r.phi_switch_deg)),
+        inclination_tie=math.radians(float(r.inclination_tie_deg)),
+    )
 
 
 def fallback_threshold(cfg, threshold: float) -> float | None:

@@ -33,13 +33,13 @@ the window. A candidate with no valid depth or normal in its window is dropped.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
 from pipeline.camera.geometry import Intrinsics, backproject
-from pipeline.labelling.types import GraspClass
+from pipeline.grasping.types import GraspClass
 from pipeline.planner.decode import GraspPrediction
 
 
@@ -83,8 +83,9 @@ class GraspCandidate:
     second_tier: bool = False  # the closed loop's fallback tier (``Planner.plan``), not Eq. 3's
 
 
-def surface_normal(points_cam: np.ndarray, u: int, v: int, half_window: int,
-                   max_depth_jump: float) -> np.ndarray | None:
+def surface_normal(
+    points_cam: np.ndarray, u: int, v: int, half_window: int, max_depth_jump: float
+) -> np.ndarray | None:
     """Unit normal (3,) at pixel (u, v), pointing towards the camera, or None if no pixel of the
     window is usable.
 
@@ -98,7 +99,7 @@ def surface_normal(points_cam: np.ndarray, u: int, v: int, half_window: int,
     u0, u1 = max(u - half_window, 1), min(u + half_window, W - 2)
     if v0 > v1 or u0 > u1:
         return None
-    P = points_cam[v0 - 1:v1 + 2, u0 - 1:u1 + 2].astype(np.float64)  # (h+2, w+2, 3)
+    P = points_cam[v0 - 1 : v1 + 2, u0 - 1 : u1 + 2].astype(np.float64)  # (h+2, w+2, 3)
     centre = P[1:-1, 1:-1]
     left, right = P[1:-1, :-2], P[1:-1, 2:]
     up, down = P[:-2, 1:-1], P[2:, 1:-1]
@@ -126,16 +127,21 @@ def inclination(normal_cam: np.ndarray) -> float:
     return float(np.arccos(np.clip(-n[2] / np.linalg.norm(n), -1.0, 1.0)))
 
 
-def graspability(depth: float, phi: float, d_ground: float,
-                 phi_switch: float) -> tuple[float, float, float]:
+def graspability(
+    depth: float, phi: float, d_ground: float, phi_switch: float
+) -> tuple[float, float, float]:
     """Eqs. 7, 9, 10 → (J, J_distance, J_inclination)."""
     j_distance = 1.0 - depth / d_ground
     j_inclination = 1.0 - 2.0 * phi / math.pi
     return (j_distance if phi < phi_switch else j_inclination), j_distance, j_inclination
 
 
-def rank_grasps(predictions: Sequence[GraspPrediction], depth_m: np.ndarray,
-                intrinsics: Intrinsics, cfg: RankingConfig) -> list[GraspCandidate]:
+def rank_grasps(
+    predictions: Sequence[GraspPrediction],
+    depth_m: np.ndarray,
+    intrinsics: Intrinsics,
+    cfg: RankingConfig,
+) -> list[GraspCandidate]:
     """Score and sort one image's predictions; G_opt is the first candidate.
 
     Keeps predictions with ``probability > cfg.threshold`` (Eq. 3) whose class is not NG.
@@ -160,7 +166,7 @@ def rank_grasps(predictions: Sequence[GraspPrediction], depth_m: np.ndarray,
         v = int(np.clip(round(pred.v), 0, H - 1))
         depth = float(depth_m[v, u])
         if depth <= 0:
-            window = depth_m[max(v - h, 0):v + h + 1, max(u - h, 0):u + h + 1]
+            window = depth_m[max(v - h, 0) : v + h + 1, max(u - h, 0) : u + h + 1]
             if not (window > 0).any():
                 continue
             depth = float(np.median(window[window > 0]))
@@ -169,11 +175,20 @@ def rank_grasps(predictions: Sequence[GraspPrediction], depth_m: np.ndarray,
             continue
         phi = inclination(normal)
         score, j_distance, j_inclination = graspability(depth, phi, cfg.d_ground, cfg.phi_switch)
-        out.append(GraspCandidate(
-            u=float(pred.u), v=float(pred.v), grasp_class=GraspClass(pred.grasp_class),
-            probability=float(pred.probability), score=score, phi=phi, depth=depth,
-            normal_cam=normal.astype(np.float32), j_distance=j_distance,
-            j_inclination=j_inclination))
+        out.append(
+            GraspCandidate(
+                u=float(pred.u),
+                v=float(pred.v),
+                grasp_class=GraspClass(pred.grasp_class),
+                probability=float(pred.probability),
+                score=score,
+                phi=phi,
+                depth=depth,
+                normal_cam=normal.astype(np.float32),
+                j_distance=j_distance,
+                j_inclination=j_inclination,
+            )
+        )
     return order_candidates(out, cfg)
 
 

@@ -38,16 +38,23 @@ class ScheduleConfig:
         if self.name not in SCHEDULES:
             raise ValueError(f"train.schedule.name={self.name!r}; choose one of {SCHEDULES}")
         if self.name == "onecycle" and not 0.0 < self.warmup_fraction < 1.0:
-            raise ValueError(f"train.schedule.warmup_fraction={self.warmup_fraction} must lie "
-                             "strictly between 0 and 1")
+            raise ValueError(
+                f"train.schedule.warmup_fraction={self.warmup_fraction} must lie "
+                "strictly between 0 and 1"
+            )
 
 
 def schedule_config(cfg) -> ScheduleConfig:
     """The schedule of a composed config (``train.lr`` and ``train.schedule``)."""
     s = cfg.train.schedule
-    return ScheduleConfig(str(s.name), float(cfg.train.lr), float(s.max_lr),
-                          float(s.warmup_fraction), float(s.div_factor),
-                          float(s.final_div_factor))
+    return ScheduleConfig(
+        str(s.name),
+        float(cfg.train.lr),
+        float(s.max_lr),
+        float(s.warmup_fraction),
+        float(s.div_factor),
+        float(s.final_div_factor),
+    )
 
 
 def _cos(start: float, end: float, pct: float) -> float:

@@ -36,12 +36,15 @@ def table1(planner: Planner, data: GraspDataset, radius_px: float, depth_of=None
 
 
 @torch.no_grad()
-def ranked_images(planner: Planner, data: GraspDataset, progress: bool = False,
-                  desc: str = "planning") -> list[ImagePredictions]:
+def ranked_images(
+    planner: Planner, data: GraspDataset, progress: bool = False, desc: str = "planning"
+) -> list[ImagePredictions]:
     """Every image of a split planned at the planner's th: its candidates in Eq. 7's order and
     its label points (``pipeline.planner.calibration``). ``desc``: the progress bar's label."""
-    return [image_predictions(planner.plan(data.depth_m(i), data.intrinsics), data.rows[i])
-            for i in tqdm(range(len(data)), desc=desc, unit="image", disable=not progress)]
+    return [
+        image_predictions(planner.plan(data.depth_m(i), data.intrinsics), data.rows[i])
+        for i in tqdm(range(len(data)), desc=desc, unit="image", disable=not progress)
+    ]
 
 
 def image_predictions(points, rows: dict) -> ImagePredictions:
@@ -52,4 +55,6 @@ def image_predictions(points, rows: dict) -> ImagePredictions:
         uv=np.array([[p.u, p.v] for p in points], np.float64).reshape(-1, 2),
         classes=np.array([int(p.grasp_class) for p in points], np.int64),
         scores=np.array([p.probability for p in points], np.float64),
-        gt_uv=rows["uv"], gt_classes=rows["grasp_class"])
+        gt_uv=rows["uv"],
+        gt_classes=rows["grasp_class"],
+    )

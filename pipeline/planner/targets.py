@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from pipeline.labelling.types import GraspClass
+from pipeline.grasping.types import GraspClass
 
 EMPTY = -1  # ``cls`` and ``kept_index`` value of a cell without a ground-truth point
 # Points this far (pixels) outside the image are an error; nearer ones are clamped into it
@@ -33,8 +33,7 @@ OUTSIDE_TOLERANCE_PX = 1.0
 _BELOW_ONE = np.nextafter(np.float32(1.0), np.float32(0.0))  # largest float32 < 1
 
 
-def encode(uv: np.ndarray, classes: np.ndarray, grid: int = 13,
-           image_size: int = 416) -> dict:
+def encode(uv: np.ndarray, classes: np.ndarray, grid: int = 13, image_size: int = 416) -> dict:
     """Grasp points of one image → grid targets.
 
     Args:
@@ -61,9 +60,11 @@ def encode(uv: np.ndarray, classes: np.ndarray, grid: int = 13,
         raise ValueError("uv holds NaN or infinite grasp points; fix the labels")
     bad = (uv < -OUTSIDE_TOLERANCE_PX) | (uv > image_size + OUTSIDE_TOLERANCE_PX)
     if bad.any():
-        raise ValueError(f"grasp points {uv[bad.any(1)].tolist()} lie outside the "
-                         f"{image_size}×{image_size} image; were the labels made for "
-                         "another image size?")
+        raise ValueError(
+            f"grasp points {uv[bad.any(1)].tolist()} lie outside the "
+            f"{image_size}×{image_size} image; were the labels made for "
+            "another image size?"
+        )
     if np.any((classes < 0) | (classes >= len(GraspClass))):
         raise ValueError(f"classes must be in 0..{len(GraspClass) - 1}, got {np.unique(classes)}")
 
@@ -88,12 +89,18 @@ def encode(uv: np.ndarray, classes: np.ndarray, grid: int = 13,
         offset[jv, ju] = frac[i]
         cls[jv, ju] = classes[i]
         kept[jv, ju] = i
-    return {"obj": obj, "offset": offset, "cls": cls, "kept_index": kept,
-            "lost": int(len(uv) - obj.sum())}
+    return {
+        "obj": obj,
+        "offset": offset,
+        "cls": cls,
+        "kept_index": kept,
+        "lost": int(len(uv) - obj.sum()),
+    }
 
 
-def decode_points(obj: np.ndarray, offset: np.ndarray, cls: np.ndarray,
-                  image_size: int = 416) -> tuple[np.ndarray, np.ndarray]:
+def decode_points(
+    obj: np.ndarray, offset: np.ndarray, cls: np.ndarray, image_size: int = 416
+) -> tuple[np.ndarray, np.ndarray]:
     """Inverse of ``encode``: the cells with ``obj`` → points in row-major cell order.
 
     Args:
@@ -114,6 +121,8 @@ def decode_points(obj: np.ndarray, offset: np.ndarray, cls: np.ndarray,
 def stack_targets(targets: list[dict]) -> dict[str, torch.Tensor]:
     """``encode`` outputs of B images → a batch for ``pipeline.planner.loss.grasp_loss``:
     obj (B, N, N) bool, offset (B, N, N, 2) float32, cls (B, N, N) int64."""
-    return {"obj": torch.from_numpy(np.stack([t["obj"] for t in targets])),
-            "offset": torch.from_numpy(np.stack([t["offset"] for t in targets])),
-            "cls": torch.from_numpy(np.stack([t["cls"] for t in targets]))}
+    return {
+        "obj": torch.from_numpy(np.stack([t["obj"] for t in targets])),
+        "offset": torch.from_numpy(np.stack([t["offset"] for t in targets])),
+        "cls": torch.from_numpy(np.stack([t["cls"] for t in targets])),
+    }

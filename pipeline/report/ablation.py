@@ -1,6 +1,6 @@
 """Ablation section: what each execution extension of the closed loop contributes, from the
 ablation artifact (``data/ablation/<version>``, ``report.ablation_version``; optional;
-``pipeline.ablation``).
+``pipeline.stages.ablation``).
 
 Table ``ablation``: per planner and variant (every run on the ``dev`` split), the closed loop's
 success rate and boxes picked with their Wilson 95 % intervals, PPH, the failures by kind, how
@@ -16,14 +16,23 @@ from typing import Any
 from pipeline.artifacts import ArtifactError
 from pipeline.report.section import Context, Section
 from pipeline.report.tables import (
-    Table, book_columns, end_columns, failure_columns, integer, pph_column, reason_column,
-    table_of, text_column,
+    Table,
+    book_columns,
+    end_columns,
+    failure_columns,
+    integer,
+    pph_column,
+    reason_column,
+    table_of,
+    text_column,
 )
 from pipeline.report.upstream import ArtifactInfo, resolve_upstream
 
 ABLATION_SECTION = "Ablation: what each execution extension contributes"
 ABLATION_NOT_RUN = "Ablation: not run yet (`make ablation`)."
-SPLIT = "dev"  # every ablation run's (pipeline.ablation.SPLIT); Table 3's headline is on test
+SPLIT = (
+    "dev"  # every ablation run's (pipeline.stages.ablation.SPLIT); Table 3's headline is on test
+)
 SIMULATOR_KNOWLEDGE = "simulator_knowledge"  # the variant whose check sees the true boxes
 
 
@@ -45,8 +54,10 @@ class AblationInfo(ArtifactInfo):
         """Raises ``ArtifactError`` when the manifest lacks the rows."""
         rows = (manifest.get("metrics") or {}).get("ablation")
         if not isinstance(rows, list):
-            raise ArtifactError(f"{folder.name}/manifest.json (ablation) lacks metrics.ablation; "
-                                "recompute it with `make ablation` (ablation.force=true).")
+            raise ArtifactError(
+                f"{folder.name}/manifest.json (ablation) lacks metrics.ablation; "
+                "recompute it with `make ablation` (ablation.force=true)."
+            )
         return cls(folder, manifest)
 
 
@@ -58,9 +69,16 @@ def resolve_ablation(root: Path, version: str) -> AblationInfo | None:
 def ablation_table(rows: list[dict]) -> Table:
     """The ablation rows (``metrics.ablation``) as a table: rates in percent with their 95 %
     intervals (CSV: rate and bounds in columns of their own)."""
-    columns = [text_column("planner", "planner"), text_column("variant", "variant"),
-               text_column("overrides", "overrides"), *book_columns(),
-               pph_column("PPH (motion)"), *failure_columns(), *end_columns(), reason_column()]
+    columns = [
+        text_column("planner", "planner"),
+        text_column("variant", "variant"),
+        text_column("overrides", "overrides"),
+        *book_columns(),
+        pph_column("PPH (motion)"),
+        *failure_columns(),
+        *end_columns(),
+        reason_column(),
+    ]
     return table_of("ablation", columns, rows, text_columns=3)
 
 
@@ -79,7 +97,8 @@ def render_ablation(info: AblationInfo | None, tables: dict[str, Table]) -> list
     trials = info.trials
     knowledge = any(r.get("variant") == SIMULATOR_KNOWLEDGE for r in info.rows)
     out += [
-        f"Ablation artifact `{info.version}` (`python -m pipeline.ablation`): each extension "
+        f"Ablation artifact `{info.version}` (`python -m pipeline.stages.ablation`): "
+        "each extension "
         "of the closed loop turned off on its own, then all at once, every run on the "
         f"**{SPLIT} split**: the heaps development used, the same for every row"
         + (f", {trials} trials per planner and variant" if trials is not None else "")
@@ -88,9 +107,13 @@ def render_ablation(info: AblationInfo | None, tables: dict[str, Table]) -> list
         "labels and the run-time check follow the same switches, so its rows show what the "
         "extension does to execution alone; the DCNN keeps the network trained on the default "
         "labels, and a variant changes its execution only. "
-        + (f"*{SIMULATOR_KNOWLEDGE}* is no extension but a measure: it gives the run-time check "
-           "the heap's true boxes, ground truth a real cell lacks, to show what the robot's own "
-           "model of the heap (from its depth image) costs. " if knowledge else "")
+        + (
+            f"*{SIMULATOR_KNOWLEDGE}* is no extension but a measure: it gives the run-time check "
+            "the heap's true boxes, ground truth a real cell lacks, to show what the robot's own "
+            "model of the heap (from its depth image) costs. "
+            if knowledge
+            else ""
+        )
         + f"Boxes per planner and variant: {', '.join(str(b) for b in boxes)}. Success rate "
         "and boxes picked with their Wilson 95 % score intervals in brackets; failures by kind "
         "as in Table 3's list; a row with no attempt says why in its last column.",
@@ -113,8 +136,9 @@ class AblationSection(Section):
     def tables(self, info: AblationInfo, ctx: Context) -> list[Table]:
         return [ablation_table(info.rows)]
 
-    def markdown(self, info: AblationInfo | None, tables: dict[str, Table],
-                 figures: dict[str, str]) -> list[str]:
+    def markdown(
+        self, info: AblationInfo | None, tables: dict[str, Table], figures: dict[str, str]
+    ) -> list[str]:
         return render_ablation(info, tables)
 
     def metrics(self, info: AblationInfo | None) -> dict[str, Any]:

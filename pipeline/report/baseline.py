@@ -34,36 +34,57 @@ class BaselineInfo(ArtifactInfo):
         """Raises ``ArtifactError`` when the manifest lacks Table 2 or ``chosen.npz`` is
         missing."""
         try:
-            complete = (bool(manifest["metrics"]["table2"]["rows"])
-                        and (folder / "chosen.npz").is_file())
+            complete = (
+                bool(manifest["metrics"]["table2"]["rows"]) and (folder / "chosen.npz").is_file()
+            )
         except (KeyError, TypeError):
             complete = False
         if not complete:
-            raise ArtifactError(f"{folder.name}/manifest.json (baseline) lacks metrics.table2; "
-                                "recompute it with `make baseline` (baseline.force=true).")
+            raise ArtifactError(
+                f"{folder.name}/manifest.json (baseline) lacks metrics.table2; "
+                "recompute it with `make baseline` (baseline.force=true)."
+            )
         return cls(folder, manifest)
 
 
-def resolve_baseline(root: Path, version: str, gen_version: str,
-                     train_version: str | None) -> BaselineInfo | None:
+def resolve_baseline(
+    root: Path, version: str, gen_version: str, train_version: str | None
+) -> BaselineInfo | None:
     """The baseline artifact to report, or None when ``version`` is "latest" and none exists.
 
     Raises ``ArtifactError`` when a named version does not exist, when it was made from another
-    generation artifact (one with the same data, made by other code, is the same), when its DCNN row comes from another train artifact than the report's,
+    generation artifact (one with the same data, made by other code, is the same), when its DCNN row
+    comes from another train artifact than the report's,
     or when its manifest lacks Table 2.
     """
-    return resolve_upstream(root, "baseline", version, BaselineInfo.load, [
-        Match("generate", gen_version, lambda name, theirs: (
-            f"baseline artifact {name} was made from generation artifact "
-            f"{theirs}, but the report reads {gen_version}: pass matching versions "
-            f"(report.baseline_version=...), or rerun `make baseline` and then the report."),
-            stage_dir=root / "generate"),
-        Match("train", train_version, lambda name, theirs: (
-            f"baseline artifact {name} compared the DCNN of train artifact {theirs}, "
-            f"but the report reads train artifact {train_version}: rerun `make baseline` "
-            f"(baseline.train_version={train_version}) and then the report."),
-            if_both_known=True),
-    ])
+    return resolve_upstream(
+        root,
+        "baseline",
+        version,
+        BaselineInfo.load,
+        [
+            Match(
+                "generate",
+                gen_version,
+                lambda name, theirs: (
+                    f"baseline artifact {name} was made from generation artifact "
+                    f"{theirs}, but the report reads {gen_version}: pass matching versions "
+                    f"(report.baseline_version=...), or rerun `make baseline` and then the report."
+                ),
+                stage_dir=root / "generate",
+            ),
+            Match(
+                "train",
+                train_version,
+                lambda name, theirs: (
+                    f"baseline artifact {name} compared the DCNN of train artifact {theirs}, "
+                    f"but the report reads train artifact {train_version}: rerun `make baseline` "
+                    f"(baseline.train_version={train_version}) and then the report."
+                ),
+                if_both_known=True,
+            ),
+        ],
+    )
 
 
 def table2_table(info: BaselineInfo) -> Table:
@@ -73,36 +94,66 @@ def table2_table(info: BaselineInfo) -> Table:
     key = f"within_{radius:g}px"
     paper = t2["paper"]["within_30px"]
     old = f"{key}_inclusive"
-    headers = ["", "planner", f"less than {radius:g} px", "images", "no grasp",
-               f"less than {radius:g} px where a grasp was found", "median distance (px)",
-               f"old definition: at most {radius:g} px"]
-    rows = [["paper", "Dex-Net 4.0", 100.0 * paper["dexnet4"], None, None, None, None, None],
-            ["paper", "ours (DCNN)", 100.0 * paper["ours"], None, None, None, None, None]]
+    headers = [
+        "",
+        "planner",
+        f"less than {radius:g} px",
+        "images",
+        "no grasp",
+        f"less than {radius:g} px where a grasp was found",
+        "median distance (px)",
+        f"old definition: at most {radius:g} px",
+    ]
+    rows = [
+        ["paper", "Dex-Net 4.0", 100.0 * paper["dexnet4"], None, None, None, None, None],
+        ["paper", "ours (DCNN)", 100.0 * paper["ours"], None, None, None, None, None],
+    ]
     for r in t2["rows"]:
         images, missing = int(r["images"]), int(r["no_grasp"])
         found = images - missing
-        rows.append(["this reproduction", r["name"], 100.0 * float(r[key]), images, missing,
-                     100.0 * float(r[key]) * images / found if found else None,
-                     r["median_distance_px"],
-                     100.0 * float(r[old]) if old in r else None])
-    return Table("table2_centre_distance", headers, rows,
-                 ["", "", "{:.2f} %", "{}", "{}", "{:.2f} %", "{:.1f}", "{:.2f} %"],
-                 csv_formats=["", "", "{:.4f}", "{}", "{}", "{:.4f}", "{:.3f}", "{:.4f}"],
-                 text_columns=2)
+        rows.append(
+            [
+                "this reproduction",
+                r["name"],
+                100.0 * float(r[key]),
+                images,
+                missing,
+                100.0 * float(r[key]) * images / found if found else None,
+                r["median_distance_px"],
+                100.0 * float(r[old]) if old in r else None,
+            ]
+        )
+    return Table(
+        "table2_centre_distance",
+        headers,
+        rows,
+        ["", "", "{:.2f} %", "{}", "{}", "{:.2f} %", "{:.1f}", "{:.2f} %"],
+        csv_formats=["", "", "{:.4f}", "{}", "{}", "{:.4f}", "{:.3f}", "{:.4f}"],
+        text_columns=2,
+    )
 
 
 def planning_time_table(info: BaselineInfo) -> Table:
     """Planning time per image of each planner, as measured in the baseline run (volatile)."""
     times = info.manifest.get("timings", {}).get("planning_ms_per_image", {})
     names = {r["planner"]: r["name"] for r in info.metrics["table2"]["rows"]}
-    rows = [[names.get(k, k), v.get("mean"), v.get("median"), v.get("p90")]
-            for k, v in times.items() if v]
-    return Table("planning_time", ["planner", "mean (ms)", "median (ms)", "90th pct. (ms)"],
-                 rows, ["", "{:.1f}", "{:.1f}", "{:.1f}"], csv_formats=["", "", "", ""])
+    rows = [
+        [names.get(k, k), v.get("mean"), v.get("median"), v.get("p90")]
+        for k, v in times.items()
+        if v
+    ]
+    return Table(
+        "planning_time",
+        ["planner", "mean (ms)", "median (ms)", "90th pct. (ms)"],
+        rows,
+        ["", "{:.1f}", "{:.1f}", "{:.1f}"],
+        csv_formats=["", "", "", ""],
+    )
 
 
-def render_baseline(info: BaselineInfo | None, tables: dict[str, Table],
-                    figures: dict[str, str]) -> list[str]:
+def render_baseline(
+    info: BaselineInfo | None, tables: dict[str, Table], figures: dict[str, str]
+) -> list[str]:
     """README lines of the Table 2 section."""
     out = [f"## {TABLE2_SECTION}", ""]
     if info is None:
@@ -164,7 +215,7 @@ def _ood_lines(metrics: dict) -> list[str]:
     labels = metrics.get("ood_candidate_labels", {}).get("train", {})
     test = g.get("box_test", {})
     return [
-        "**Trained out of domain.** The row \"trained on non-box objects\" is the same GQ-CNN, "
+        '**Trained out of domain.** The row "trained on non-box objects" is the same GQ-CNN, '
         "crop, training loop and CEM, trained the way Dex-Net 4.0 was: on heaps of objects "
         f"other than the test objects ({labels.get('scenes', 0):,} heaps of "
         f"{labels.get('objects', 0):,} random convex cylinders, prisms and hulls in the same "
@@ -182,13 +233,15 @@ class BaselineSection(Section):
     name = "baseline"
     paper_table = (
         "Table 2 (optimal grasp points within 30 pixels of a surface centre, ours vs. "
-        f"Dex-Net) is reported above, in \"{TABLE2_SECTION}\". ",
+        f'Dex-Net) is reported above, in "{TABLE2_SECTION}". ',
         "Table 2 (ours vs. Dex-Net) will appear above once the baseline stage has run "
-        "(`make baseline`). ")
+        "(`make baseline`). ",
+    )
 
     def resolve(self, ctx: Context) -> BaselineInfo | None:
-        return resolve_baseline(ctx.root, ctx.requested("baseline"), ctx.version("generate"),
-                                ctx.version("train"))
+        return resolve_baseline(
+            ctx.root, ctx.requested("baseline"), ctx.version("generate"), ctx.version("train")
+        )
 
     def tables(self, info: BaselineInfo, ctx: Context) -> list[Table]:
         return [table2_table(info), planning_time_table(info)]
@@ -196,24 +249,35 @@ class BaselineSection(Section):
     def figures(self, info: BaselineInfo, ctx: Context, folder: Path) -> dict[str, str]:
         chosen = read_npz(info.folder / "chosen.npz")
         planners = [r["planner"] for r in info.metrics["table2"]["rows"]]
-        curve = np.loadtxt(info.folder / "table2_curve.csv", delimiter=",", skiprows=1,
-                           ndmin=2)
-        figure_table2_curve(curve[:, 0], {p: curve[:, 1 + k] for k, p in enumerate(planners)},
-                            folder / "figures" / "table2_curve.png",
-                            info.metrics["table2"]["paper"]["within_30px"],
-                            float(info.metrics["table2"]["paper"]["radius_px"]))
-        figures = {"figures/table2_curve.png": (
-            "Share of test images whose optimal grasp point lies within r pixels of a true "
-            "surface centre, per planner (Table 2 at r = 30 px; stars: the paper's values).")}
+        curve = np.loadtxt(info.folder / "table2_curve.csv", delimiter=",", skiprows=1, ndmin=2)
+        figure_table2_curve(
+            curve[:, 0],
+            {p: curve[:, 1 + k] for k, p in enumerate(planners)},
+            folder / "figures" / "table2_curve.png",
+            info.metrics["table2"]["paper"]["within_30px"],
+            float(info.metrics["table2"]["paper"]["radius_px"]),
+        )
+        figures = {
+            "figures/table2_curve.png": (
+                "Share of test images whose optimal grasp point lies within r pixels of a true "
+                "surface centre, per planner (Table 2 at r = 30 px; stars: the paper's values)."
+            )
+        }
         if ctx.num_samples > 0:
-            drawn = figure_planner_points(ctx.found["generate"].folder, chosen, planners,
-                                          ctx.num_samples,
-                                          folder / "figures" / "fig10_planners.png")
+            drawn = figure_planner_points(
+                ctx.found["generate"].folder,
+                chosen,
+                planners,
+                ctx.num_samples,
+                folder / "figures" / "fig10_planners.png",
+            )
             figures["figures/fig10_planners.png"] = (
                 f"{drawn} test depth images with each planner's optimal grasp point and the "
-                "true surface centres (white +), like the paper's Fig. 10.")
+                "true surface centres (white +), like the paper's Fig. 10."
+            )
         return figures
 
-    def markdown(self, info: BaselineInfo | None, tables: dict[str, Table],
-                 figures: dict[str, str]) -> list[str]:
+    def markdown(
+        self, info: BaselineInfo | None, tables: dict[str, Table], figures: dict[str, str]
+    ) -> list[str]:
         return render_baseline(info, tables, figures)

@@ -18,32 +18,41 @@ from pathlib import Path
 from typing import Any
 
 from pipeline.artifacts import ArtifactError
-from pipeline.report.ablation import (
-    SIMULATOR_KNOWLEDGE, SPLIT as DEV_SPLIT, AblationInfo, resolve_ablation,
-)
+from pipeline.report.ablation import SIMULATOR_KNOWLEDGE, AblationInfo, resolve_ablation
+from pipeline.report.ablation import SPLIT as DEV_SPLIT
 from pipeline.report.figures import figure_servo_convergence
 from pipeline.report.section import Context, Section
 from pipeline.report.tables import (
-    Column, Table, book_columns, count_column, drops_table, end_columns, failure_columns, number,
-    pph_column, reason_column, table_of, text_column,
+    Column,
+    Table,
+    book_columns,
+    count_column,
+    drops_table,
+    end_columns,
+    failure_columns,
+    number,
+    pph_column,
+    reason_column,
+    table_of,
+    text_column,
 )
 from pipeline.report.upstream import ArtifactInfo, resolve_upstream
 
 TABLE3_SECTION = "Table 3: closed-loop bin-picking (Secs. 5, 6)"
 EVALUATE_NOT_RUN = "Closed-loop evaluation: not run yet (`make evaluate`)."
-PLANNER_LABELS = {"dcnn": "ours: DCNN + descriptor + 2.5D VS (2 cups)",
-                  "dexnet": "Dex-Net-style GQ-CNN + CEM, trained on the box heaps, same robot "
-                            "(1 cup)",
-                  "dexnet_ood": "Dex-Net-style GQ-CNN + CEM, trained on non-box objects, same "
-                                "robot (1 cup)",
-                  "oracle": "oracle: the labelling stage's labels on the home image (ground "
-                            "truth; the ceiling of execution, not a planner)"}
+PLANNER_LABELS = {
+    "dcnn": "ours: DCNN + descriptor + 2.5D VS (2 cups)",
+    "dexnet": "Dex-Net-style GQ-CNN + CEM, trained on the box heaps, same robot (1 cup)",
+    "dexnet_ood": "Dex-Net-style GQ-CNN + CEM, trained on non-box objects, same robot (1 cup)",
+    "oracle": "oracle: the labelling stage's labels on the home image (ground "
+    "truth; the ceiling of execution, not a planner)",
+}
 FAILURE_MEANING = {
     "no_seal": "a cup's rim did not lie on one face of one box (edge, corner, small face, "
-               "tilt beyond the cup's compliance)",
+    "tilt beyond the cup's compliance)",
     "dropped": "sealed, but the active cups cannot hold the box's weight and torque",
     "collision": "the arm or hand touched the bin (a protective stop; other boxes are pushed "
-                 "aside under physics unless evaluate.stop_on_box_contact)",
+    "aside under physics unless evaluate.stop_on_box_contact)",
     "joint_limits": "the servo ran into joint limits",
     "timeout": "the servo did not converge in time",
     "lost_target": "the descriptor found no surface at the tracked point",
@@ -70,8 +79,10 @@ class EvaluateInfo(ArtifactInfo):
     def load(cls, folder: Path, manifest: dict) -> EvaluateInfo:
         """Raises ``ArtifactError`` when the manifest lacks Table 3."""
         if not (manifest.get("metrics") or {}).get("table3"):
-            raise ArtifactError(f"{folder.name}/manifest.json (evaluate) lacks metrics.table3; "
-                                "recompute it with `make evaluate` (evaluate.force=true).")
+            raise ArtifactError(
+                f"{folder.name}/manifest.json (evaluate) lacks metrics.table3; "
+                "recompute it with `make evaluate` (evaluate.force=true)."
+            )
         return cls(folder, manifest)
 
 
@@ -92,7 +103,7 @@ def _hand(planner: str) -> str:
 
 
 def _trials(n: Any) -> str:
-    """", 100 trials" ("" where the count is not known)."""
+    """ ", 100 trials" ("" where the count is not known)."""
     return "" if n is None else f", {n} trial{'' if n == 1 else 's'}"
 
 
@@ -104,19 +115,27 @@ def evaluation_rows(info: ArtifactInfo) -> list[dict]:
     rows = []
     for r in info.metrics["table3"]:
         n = r.get("trials")
-        rows.append({**r, "source": f"this reproduction, {split} split{_trials(n)}",
-                     "split": split, "variant": "", "heaps": f"{split}{_trials(n)}"})
+        rows.append(
+            {
+                **r,
+                "source": f"this reproduction, {split} split{_trials(n)}",
+                "split": split,
+                "variant": "",
+                "heaps": f"{split}{_trials(n)}",
+            }
+        )
     return rows
 
 
 def _dev_source(variant: str, n: int | None) -> str:
     """How Table 3 labels an ablation row on the dev split."""
     if variant == SIMULATOR_KNOWLEDGE:
-        return ("simulator knowledge: the run-time check sees the heap's true boxes (not a real "
-                f"cell), {DEV_SPLIT} split{_trials(n)}")
+        return (
+            "simulator knowledge: the run-time check sees the heap's true boxes (not a real "
+            f"cell), {DEV_SPLIT} split{_trials(n)}"
+        )
     size = "the paper's size; " if n == PAPER_TRIALS else ""
-    return (f"this reproduction, {DEV_SPLIT} split{_trials(n)} ({size}the heaps development "
-            "used)")
+    return f"this reproduction, {DEV_SPLIT} split{_trials(n)} ({size}the heaps development used)"
 
 
 def dev_rows(ablation: AblationInfo | None) -> list[dict]:
@@ -125,17 +144,34 @@ def dev_rows(ablation: AblationInfo | None) -> list[dict]:
     if ablation is None:
         return []
     n = ablation.trials
-    return [{**r, "source": _dev_source(v, n), "split": DEV_SPLIT, "trials": n,
-             "heaps": f"{DEV_SPLIT}{_trials(n)}"
-             + (", simulator knowledge" if v == SIMULATOR_KNOWLEDGE else "")}
-            for v in DEV_VARIANTS for r in ablation.rows if r.get("variant") == v]
+    return [
+        {
+            **r,
+            "source": _dev_source(v, n),
+            "split": DEV_SPLIT,
+            "trials": n,
+            "heaps": f"{DEV_SPLIT}{_trials(n)}"
+            + (", simulator knowledge" if v == SIMULATOR_KNOWLEDGE else ""),
+        }
+        for v in DEV_VARIANTS
+        for r in ablation.rows
+        if r.get("variant") == v
+    ]
 
 
 def paper_rows(info: ArtifactInfo) -> list[dict]:
     """The paper's Table 3 (``paper_table3``: success in percent) as rows of ours."""
-    return [{"source": PAPER_SOURCE, "system": r["system"], "hand": r["hand"],
-             "success_rate": r["success"] / 100.0, "pph_motion": r["pph"],
-             "no_attempt_reason": ""} for r in info.metrics["paper_table3"]]
+    return [
+        {
+            "source": PAPER_SOURCE,
+            "system": r["system"],
+            "hand": r["hand"],
+            "success_rate": r["success"] / 100.0,
+            "pph_motion": r["pph"],
+            "no_attempt_reason": "",
+        }
+        for r in info.metrics["paper_table3"]
+    ]
 
 
 def _system(r: dict) -> str:
@@ -148,12 +184,23 @@ def table3_table(info: ArtifactInfo, ablation: AblationInfo | None = None) -> Ta
     robot's simulated motion, why a row made no attempt. CSV: the split and trials in columns
     of their own, rates and interval bounds in percent."""
     rows = paper_rows(info) + evaluation_rows(info) + dev_rows(ablation)
-    source = Column("", lambda r: r["source"], csv=(
-        ("source", lambda r: r["source"], ""), ("split", lambda r: r.get("split"), ""),
-        ("trials", lambda r: r.get("trials"), "")))
-    columns = [source, Column("system", _system),
-               Column("hand", lambda r: r.get("hand") or _hand(r["planner"])),
-               *book_columns(), pph_column("mean PPH (motion only)"), reason_column()]
+    source = Column(
+        "",
+        lambda r: r["source"],
+        csv=(
+            ("source", lambda r: r["source"], ""),
+            ("split", lambda r: r.get("split"), ""),
+            ("trials", lambda r: r.get("trials"), ""),
+        ),
+    )
+    columns = [
+        source,
+        Column("system", _system),
+        Column("hand", lambda r: r.get("hand") or _hand(r["planner"])),
+        *book_columns(),
+        pph_column("mean PPH (motion only)"),
+        reason_column(),
+    ]
     return table_of("table3_success", columns, rows, text_columns=3)
 
 
@@ -163,18 +210,31 @@ def failures_table(info: ArtifactInfo, ablation: AblationInfo | None = None) -> 
     dcnn_fallback_ratio``; — for the other planners and for artifacts that predate it), per
     planner: the evaluation's rows, then the ablation's dev rows (``dev_rows``; — where the
     ablation does not keep a count)."""
+
     def tier(key: str):
         return lambda r: int(r[key]) if r["planner"] == "dcnn" and key in r else None
 
-    heaps = Column("heaps", lambda r: r["heaps"], csv=(
-        ("split", lambda r: r["split"], ""), ("trials", lambda r: r.get("trials"), ""),
-        ("variant", lambda r: r["variant"], "")))
-    columns = [text_column("planner", "planner"), heaps, *failure_columns(),
-               count_column("success on another box", "wrong_target"), *end_columns(),
-               Column("second-tier attempts", tier("second_tier_attempts")),
-               Column("second-tier successes", tier("second_tier_successes"))]
-    return table_of("table3_failures", columns, evaluation_rows(info) + dev_rows(ablation),
-                    text_columns=2)
+    heaps = Column(
+        "heaps",
+        lambda r: r["heaps"],
+        csv=(
+            ("split", lambda r: r["split"], ""),
+            ("trials", lambda r: r.get("trials"), ""),
+            ("variant", lambda r: r["variant"], ""),
+        ),
+    )
+    columns = [
+        text_column("planner", "planner"),
+        heaps,
+        *failure_columns(),
+        count_column("success on another box", "wrong_target"),
+        *end_columns(),
+        Column("second-tier attempts", tier("second_tier_attempts")),
+        Column("second-tier successes", tier("second_tier_successes")),
+    ]
+    return table_of(
+        "table3_failures", columns, evaluation_rows(info) + dev_rows(ablation), text_columns=2
+    )
 
 
 def no_grasp_table(info: EvaluateInfo) -> Table:
@@ -186,55 +246,95 @@ def no_grasp_table(info: EvaluateInfo) -> Table:
     the boxes those trials left. Not asked (the oracle itself, or the option off): —."""
     import json
 
-    trials = json.loads((info.folder / "trials.json").read_text()) \
-        if (info.folder / "trials.json").exists() else []
+    trials = (
+        json.loads((info.folder / "trials.json").read_text())
+        if (info.folder / "trials.json").exists()
+        else []
+    )
     ends = [t for t in trials if t.get("end") == "no_grasp" and t.get("no_grasp")]
     reasons = sorted({k for t in ends for k in t["no_grasp"].get("rejected", {})})
-    headers = ["planner", "trials", "boxes left", "candidates",
-               *(f"rejected: {k}" for k in reasons),
-               "trials where the labels had a grasp", "boxes left by those trials"]
+    headers = [
+        "planner",
+        "trials",
+        "boxes left",
+        "candidates",
+        *(f"rejected: {k}" for k in reasons),
+        "trials where the labels had a grasp",
+        "boxes left by those trials",
+    ]
     rows = []
     for r in info.metrics["table3"]:
         mine = [t["no_grasp"] for t in ends if t["planner"] == r["planner"]]
         asked = [n for n in mine if "label_executable" in n]
         lost = [n for n in asked if n["label_executable"]]
-        rows.append([r["planner"], len(mine), sum(int(n["boxes_left"]) for n in mine),
-                     sum(int(n["candidates"]) for n in mine),
-                     *(sum(int(n.get("rejected", {}).get(k, 0)) for n in mine) for k in reasons),
-                     len(lost) if asked else None,
-                     sum(int(n["boxes_left"]) for n in lost) if asked else None])
+        rows.append(
+            [
+                r["planner"],
+                len(mine),
+                sum(int(n["boxes_left"]) for n in mine),
+                sum(int(n["candidates"]) for n in mine),
+                *(sum(int(n.get("rejected", {}).get(k, 0)) for n in mine) for k in reasons),
+                len(lost) if asked else None,
+                sum(int(n["boxes_left"]) for n in lost) if asked else None,
+            ]
+        )
     return Table("table3_no_grasp", headers, rows)
 
 
 def table3_timing_table(info: EvaluateInfo) -> Table:
     """Measured wall-clock figures of the evaluation run (volatile)."""
     t = (info.manifest.get("timings") or {}).get("planners", {})
-    headers = ["planner", "planning time median (ms; planner + run-time check)",
-               "PPH incl. planning", "descriptor (ms/frame)", "control loop (Hz, wall)", "sim s per wall s",
-               "trial wall time (s)"]
-    rows = [[PLANNER_LABELS.get(k, k), v.get("planning_ms_median"), v.get("pph_with_planning"),
-             v.get("descriptor_ms_median"), v.get("control_loop_hz"), v.get("sim_s_per_wall_s"),
-             v.get("trial_wall_s_mean")] for k, v in t.items()]
+    headers = [
+        "planner",
+        "planning time median (ms; planner + run-time check)",
+        "PPH incl. planning",
+        "descriptor (ms/frame)",
+        "control loop (Hz, wall)",
+        "sim s per wall s",
+        "trial wall time (s)",
+    ]
+    rows = [
+        [
+            PLANNER_LABELS.get(k, k),
+            v.get("planning_ms_median"),
+            v.get("pph_with_planning"),
+            v.get("descriptor_ms_median"),
+            v.get("control_loop_hz"),
+            v.get("sim_s_per_wall_s"),
+            v.get("trial_wall_s_mean"),
+        ]
+        for k, v in t.items()
+    ]
     return Table("table3_timing", headers, rows)
 
 
 def path_deviation_table(info: EvaluateInfo) -> Table:
     """How far the executed servo came from the path the run-time check predicted."""
     headers = ["planner", "attempts", "median (mm)", "largest (mm)"]
-    rows = [[PLANNER_LABELS.get(r["planner"], r["planner"]), int(r["attempts"]),
-             number(r.get("path_deviation_mm_median")), number(r.get("path_deviation_mm_max"))]
-            for r in info.metrics["table3"]]
+    rows = [
+        [
+            PLANNER_LABELS.get(r["planner"], r["planner"]),
+            int(r["attempts"]),
+            number(r.get("path_deviation_mm_median")),
+            number(r.get("path_deviation_mm_max")),
+        ]
+        for r in info.metrics["table3"]
+    ]
     return Table("table3_path_deviation", headers, rows, ["", "{}", "{:.1f}", "{:.1f}"])
 
 
 def _split_note(split: str) -> str:
     """What the evaluation's heaps are: the held-out test stream, or development's."""
     if split == "test":
-        return ("The test heaps are a seed stream of their own, disjoint from the dev heaps that "
-                "development and the ablation use: nothing (no threshold, option or variant) is "
-                "chosen on them.")
-    return (f"These heaps are the {split} stream's (`evaluate.split={split}`, or an artifact "
-            "made before the splits): development used them, so these rows are not held out.")
+        return (
+            "The test heaps are a seed stream of their own, disjoint from the dev heaps that "
+            "development and the ablation use: nothing (no threshold, option or variant) is "
+            "chosen on them."
+        )
+    return (
+        f"These heaps are the {split} stream's (`evaluate.split={split}`, or an artifact "
+        "made before the splits): development used them, so these rows are not held out."
+    )
 
 
 def _dev_rows_note(ablation: AblationInfo | None, split: str) -> list[str]:
@@ -243,13 +343,16 @@ def _dev_rows_note(ablation: AblationInfo | None, split: str) -> list[str]:
         return []
     n = ablation.trials
     size = _trials(n) + (", the paper's size" if n == PAPER_TRIALS else "")
-    return [f"Under this reproduction's {split} rows, rows of the ablation artifact "
-            f"`{ablation.version}` on the {DEV_SPLIT} split{size}: *all_on* (every default, as "
-            "in the rows above, on the heaps development used) and *simulator knowledge* (the "
-            "run-time check given the heap's true boxes, hidden ones included: ground truth a "
-            "real cell lacks, shown only to measure what the robot's own model of the heap "
-            "costs). Their failures and trial ends are in the second table below and in the "
-            "ablation section.", ""]
+    return [
+        f"Under this reproduction's {split} rows, rows of the ablation artifact "
+        f"`{ablation.version}` on the {DEV_SPLIT} split{size}: *all_on* (every default, as "
+        "in the rows above, on the heaps development used) and *simulator knowledge* (the "
+        "run-time check given the heap's true boxes, hidden ones included: ground truth a "
+        "real cell lacks, shown only to measure what the robot's own model of the heap "
+        "costs). Their failures and trial ends are in the second table below and in the "
+        "ablation section.",
+        "",
+    ]
 
 
 def _knowledge_note(ev: dict, planners: list[str]) -> str:
@@ -258,26 +361,35 @@ def _knowledge_note(ev: dict, planners: list[str]) -> str:
     model = ev.get("collision_model")
     if model == "observed":
         check = "the same observation-only check"
-        robot = ("The robot decides from its depth image alone (observation-only): the planner "
-                 "reads the home depth image, the servo each new image, and the run-time check "
-                 "tests the pose and the path against the bin and a model of the heap built from "
-                 "that image (`evaluate.collision_model=observed`; a hidden box is unknown to "
-                 "it).")
+        robot = (
+            "The robot decides from its depth image alone (observation-only): the planner "
+            "reads the home depth image, the servo each new image, and the run-time check "
+            "tests the pose and the path against the bin and a model of the heap built from "
+            "that image (`evaluate.collision_model=observed`; a hidden box is unknown to "
+            "it)."
+        )
     elif model is None:
         check = "the same check"
-        robot = ("This evaluation artifact was made before `evaluate.collision_model`: its "
-                 "run-time check tested the robot against the simulator's true boxes (simulator "
-                 "knowledge a real cell lacks); rerun `make evaluate` for the observation-only "
-                 "figures.")
+        robot = (
+            "This evaluation artifact was made before `evaluate.collision_model`: its "
+            "run-time check tested the robot against the simulator's true boxes (simulator "
+            "knowledge a real cell lacks); rerun `make evaluate` for the observation-only "
+            "figures."
+        )
     else:
         check = "the same check"
-        robot = (f"This evaluation ran with `evaluate.collision_model={model}`: the run-time "
-                 "check saw the heap's true boxes (simulator knowledge a real cell lacks), not a "
-                 "model from the depth image.")
-    oracle = (" The *oracle* row plans from ground truth (the labelling stage's labels, "
-              "computed from the simulator's ideal depth, instance mask and box poses) but "
-              f"executes through {check} and servo: the ceiling of execution, not a planner."
-              if "oracle" in planners else "")
+        robot = (
+            f"This evaluation ran with `evaluate.collision_model={model}`: the run-time "
+            "check saw the heap's true boxes (simulator knowledge a real cell lacks), not a "
+            "model from the depth image."
+        )
+    oracle = (
+        " The *oracle* row plans from ground truth (the labelling stage's labels, "
+        "computed from the simulator's ideal depth, instance mask and box poses) but "
+        f"executes through {check} and servo: the ceiling of execution, not a planner."
+        if "oracle" in planners
+        else ""
+    )
     return "**What the robot knows.** " + robot + oracle
 
 
@@ -298,11 +410,13 @@ def _timing_note(cfg: dict) -> str:
         "arm's after a move nor the heap's after a pick is on the clock), and the carry to the "
         "conveyor is a point-to-point move whose duration is computed, not simulated with the "
         "box on the cups. A real cell would run slower than these figures; the paper's are a "
-        "real robot's.")
+        "real robot's."
+    )
 
 
-def render_evaluate(info: EvaluateInfo | None, tables: dict[str, Table],
-                    ablation: AblationInfo | None = None) -> list[str]:
+def render_evaluate(
+    info: EvaluateInfo | None, tables: dict[str, Table], ablation: AblationInfo | None = None
+) -> list[str]:
     """README lines of the Table 3 section (``ablation``: the artifact whose dev rows Table 3
     shows, None: none)."""
     out = [f"## {TABLE3_SECTION}", ""]
@@ -322,7 +436,7 @@ def render_evaluate(info: EvaluateInfo | None, tables: dict[str, Table],
         "successful picks per hour of *simulated* robot time (below: what it leaves out). The "
         "paper's rows are copied from its Table 3 (a real robot; it gives no interval or "
         "attempt count). A row with no attempt says why in its last column (how its trials "
-        "ended; for \"no grasp\", the planner's candidates and what rejected them).",
+        'ended; for "no grasp", the planner\'s candidates and what rejected them).',
         "",
         *_dev_rows_note(ablation, split),
         tables["table3_success"].markdown(),
@@ -335,7 +449,7 @@ def render_evaluate(info: EvaluateInfo | None, tables: dict[str, Table],
         tables["table3_failures"].markdown(),
         *[f"- *{k}*: {v}" for k, v in FAILURE_MEANING.items()],
         "",
-        f"The {split} trials that ended with \"no grasp\": the boxes they left, the planner's "
+        f'The {split} trials that ended with "no grasp": the boxes they left, the planner\'s '
         "candidates at that home image, and why the run-time check rejected them (a "
         "robot-level NG reason; `descriptor`: no surface at the point; `hand_fit`: the "
         "pattern's cups do not lie on the surface; `repeat`: a retry of a failed plan; "
@@ -364,8 +478,12 @@ def render_evaluate(info: EvaluateInfo | None, tables: dict[str, Table],
         "[tables/table3_failures.csv](tables/table3_failures.csv), "
         "[tables/table3_no_grasp.csv](tables/table3_no_grasp.csv), "
         "[tables/table3_path_deviation.csv](tables/table3_path_deviation.csv)"
-        + (", [tables/table3_drops_by_mass.csv](tables/table3_drops_by_mass.csv)"
-           if "table3_drops_by_mass" in tables else "") + ".",
+        + (
+            ", [tables/table3_drops_by_mass.csv](tables/table3_drops_by_mass.csv)"
+            if "table3_drops_by_mass" in tables
+            else ""
+        )
+        + ".",
         "",
     ]
     return out
@@ -374,10 +492,10 @@ def render_evaluate(info: EvaluateInfo | None, tables: dict[str, Table],
 class ClosedLoopSection(Section):
     name = "evaluate"
     paper_table = (
-        "Table 3 (bin-picking success rate and speed) is reported above, in "
-        f"\"{TABLE3_SECTION}\".",
+        f'Table 3 (bin-picking success rate and speed) is reported above, in "{TABLE3_SECTION}".',
         "Table 3 (bin-picking success rate and speed) will appear above once the "
-        "closed-loop evaluation has run (`make evaluate`).")
+        "closed-loop evaluation has run (`make evaluate`).",
+    )
 
     def resolve(self, ctx: Context) -> EvaluateInfo | None:
         return resolve_evaluate(ctx.root, ctx.requested("evaluate"))
@@ -385,25 +503,38 @@ class ClosedLoopSection(Section):
     def configure(self, info: EvaluateInfo, ctx: Context) -> dict[str, Any]:
         """The ablation artifact whose dev rows Table 3 shows: the ablation section's, or resolved
         here when it has not been (its version is in the report's upstream either way)."""
-        info.ablation = ctx.found["ablation"] if "ablation" in ctx.found else \
-            resolve_ablation(ctx.root, ctx.requested("ablation"))
+        info.ablation = (
+            ctx.found["ablation"]
+            if "ablation" in ctx.found
+            else resolve_ablation(ctx.root, ctx.requested("ablation"))
+        )
         return {}
 
     def tables(self, info: EvaluateInfo, ctx: Context) -> list[Table]:
-        out = [table3_table(info, info.ablation), failures_table(info, info.ablation),
-               no_grasp_table(info), table3_timing_table(info), path_deviation_table(info)]
+        out = [
+            table3_table(info, info.ablation),
+            failures_table(info, info.ablation),
+            no_grasp_table(info),
+            table3_timing_table(info),
+            path_deviation_table(info),
+        ]
         drops = info.manifest.get("metrics", {}).get("drops_by_mass")
         if drops:  # evaluations made before the drops were counted have none
             out.append(drops_table("table3_drops_by_mass", drops))
         return out
 
     def figures(self, info: EvaluateInfo, ctx: Context, folder: Path) -> dict[str, str]:
-        figure_servo_convergence(info.folder / "servo_convergence.csv",
-                                 folder / "figures" / "servo_convergence.png")
-        return {"figures/servo_convergence.png": (
-            "Visual-servoing error over simulated time for the attempts of the logged "
-            "trials: translation error |p_e − p_e*| (normalised) and rotation error |uθ|.")}
+        figure_servo_convergence(
+            info.folder / "servo_convergence.csv", folder / "figures" / "servo_convergence.png"
+        )
+        return {
+            "figures/servo_convergence.png": (
+                "Visual-servoing error over simulated time for the attempts of the logged "
+                "trials: translation error |p_e − p_e*| (normalised) and rotation error |uθ|."
+            )
+        }
 
-    def markdown(self, info: EvaluateInfo | None, tables: dict[str, Table],
-                 figures: dict[str, str]) -> list[str]:
+    def markdown(
+        self, info: EvaluateInfo | None, tables: dict[str, Table], figures: dict[str, str]
+    ) -> list[str]:
         return render_evaluate(info, tables, info.ablation if info is not None else None)

@@ -60,15 +60,22 @@ def dataset_stats(gen_dir: Path) -> DatasetStats:
             split_steps.append(scene.settle_steps)
             if n == 0:
                 continue
-            px = np.bincount(scene.mask.ravel(), minlength=n + 1)[1:n + 1]
+            px = np.bincount(scene.mask.ravel(), minlength=n + 1)[1 : n + 1]
             kinds = np.array([b.type_index for b in scene.boxes], dtype=np.int64)
             np.add.at(type_boxes, kinds, 1)
             np.add.at(type_px, kinds, px)
         steps[split] = np.asarray(split_steps, dtype=np.int64)
-    return DatasetStats(scenes, boxes, not_settled, steps,
-                        [t["name"] for t in types],
-                        [list(t["size"]) if t.get("size") is not None else None for t in types],
-                        type_boxes, type_px, image_size)
+    return DatasetStats(
+        scenes,
+        boxes,
+        not_settled,
+        steps,
+        [t["name"] for t in types],
+        [list(t["size"]) if t.get("size") is not None else None for t in types],
+        type_boxes,
+        type_px,
+        image_size,
+    )
 
 
 def split_metrics(gen_manifest: dict, gen_dir: Path) -> dict[str, dict]:
@@ -90,12 +97,19 @@ def check_consistent(splits: dict[str, dict], stats: DatasetStats, gen_dir: Path
     for s in SPLITS:
         m = splits[s]
         if m.get("scenes", 0) != stats.scenes[s]:
-            problems.append(f"{s}: manifest says {m.get('scenes')} scenes, files hold {stats.scenes[s]}")
+            problems.append(
+                f"{s}: manifest says {m.get('scenes')} scenes, files hold {stats.scenes[s]}"
+            )
         if stats.scenes[s] and m.get("boxes") != stats.boxes[s]:
-            problems.append(f"{s}: manifest says {m.get('boxes')} boxes, files hold {stats.boxes[s]}")
+            problems.append(
+                f"{s}: manifest says {m.get('boxes')} boxes, files hold {stats.boxes[s]}"
+            )
     if problems:
-        raise ArtifactError(f"generation artifact {gen_dir} is inconsistent ("
-                            + "; ".join(problems) + "); run `make verify`, then recompute it.")
+        raise ArtifactError(
+            f"generation artifact {gen_dir} is inconsistent ("
+            + "; ".join(problems)
+            + "); run `make verify`, then recompute it."
+        )
 
 
 @dataclass
@@ -126,44 +140,85 @@ def step_unit(time_step: float) -> str:
 
 def splits_table(splits: dict[str, dict], stats: DatasetStats, time_step: float) -> Table:
     unit = step_unit(time_step)
-    headers = ["split", "scenes", "boxes", "mean boxes per scene",
-               "boxes removed (left the bin)", "scenes at the step cap",
-               f"median settle steps ({unit})", f"p90 settle steps ({unit})"]
+    headers = [
+        "split",
+        "scenes",
+        "boxes",
+        "mean boxes per scene",
+        "boxes removed (left the bin)",
+        "scenes at the step cap",
+        f"median settle steps ({unit})",
+        f"p90 settle steps ({unit})",
+    ]
     rows = []
     for s in SPLITS:
         m = splits[s]
         if not m.get("scenes"):
             rows.append([s, 0, 0, None, None, None, None, None])
             continue
-        rows.append([s, m["scenes"], m["boxes"], m["boxes_per_scene_mean"],
-                     m["boxes_removed_outside_bin"], m["scenes_not_settled"],
-                     m["settle_steps_median"], m["settle_steps_p90"]])
+        rows.append(
+            [
+                s,
+                m["scenes"],
+                m["boxes"],
+                m["boxes_per_scene_mean"],
+                m["boxes_removed_outside_bin"],
+                m["scenes_not_settled"],
+                m["settle_steps_median"],
+                m["settle_steps_p90"],
+            ]
+        )
     n = sum(stats.scenes.values())
     nb = sum(stats.boxes.values())
     all_steps = np.concatenate([stats.settle_steps[s] for s in SPLITS])
     if n:
         removed = sum(splits[s].get("boxes_removed_outside_bin", 0) for s in SPLITS)
-        rows.append(["all", n, nb, round(nb / n, 3), removed, sum(stats.not_settled.values()),
-                     float(np.median(all_steps)), float(np.percentile(all_steps, 90))])
+        rows.append(
+            [
+                "all",
+                n,
+                nb,
+                round(nb / n, 3),
+                removed,
+                sum(stats.not_settled.values()),
+                float(np.median(all_steps)),
+                float(np.percentile(all_steps, 90)),
+            ]
+        )
     else:
         rows.append(["all", 0, 0, None, None, None, None, None])
-    return Table("dataset_splits", headers, rows,
-                 ["", "", "", "{:.2f}", "", "", "{:.0f}", "{:.0f}"])
+    return Table(
+        "dataset_splits", headers, rows, ["", "", "", "{:.2f}", "", "", "{:.0f}", "{:.0f}"]
+    )
 
 
 def box_types_table(stats: DatasetStats) -> Table:
     W, H = stats.image_size
-    headers = ["box type", "edge lengths (mm)", "boxes", "share of boxes (%)",
-               f"mean visible area (px of {W}x{H})"]
+    headers = [
+        "box type",
+        "edge lengths (mm)",
+        "boxes",
+        "share of boxes (%)",
+        f"mean visible area (px of {W}x{H})",
+    ]
     total = int(stats.type_boxes.sum())
     rows = []
     for k, name in enumerate(stats.type_names):
         n = int(stats.type_boxes[k])
-        dims = ("drawn per box (boxes.cartons)" if stats.type_sizes[k] is None
-                else " x ".join(f"{1000 * v:g}" for v in stats.type_sizes[k]))
-        rows.append([name, dims, n,
-                     round(100.0 * n / total, 1) if total else None,
-                     round(float(stats.type_visible_px[k]) / n, 1) if n else None])
+        dims = (
+            "drawn per box (boxes.cartons)"
+            if stats.type_sizes[k] is None
+            else " x ".join(f"{1000 * v:g}" for v in stats.type_sizes[k])
+        )
+        rows.append(
+            [
+                name,
+                dims,
+                n,
+                round(100.0 * n / total, 1) if total else None,
+                round(float(stats.type_visible_px[k]) / n, 1) if n else None,
+            ]
+        )
     return Table("box_types", headers, rows, ["", "", "", "{:.1f}", "{:.1f}"])
 
 
@@ -184,15 +239,20 @@ def render_dataset(info: DatasetInfo, tables: dict[str, Table]) -> list[str]:
     carton_note = (
         f" The {' and '.join(gen.get('carton_splits', []))} heaps' boxes are cartons drawn per "
         "box from the carton distribution (`boxes.cartons`, docs/generation.md), type "
-        "*carton*; the size jitter applies to the other splits' types." if cartons else "")
+        "*carton*; the size jitter applies to the other splits' types."
+        if cartons
+        else ""
+    )
     jitter_note = (
         f"Edge lengths are the types' nominal sizes. Not the paper's: in the "
         f"{' and '.join(gen.get('size_jitter_splits', []))} heaps each box's three edges are "
         f"scaled by factors drawn from U({1 - jitter:g}, {1 + jitter:g}) "
         f"(`generate.size_jitter`, docs/generation.md); the other "
-        f"splits hold the exact sizes." if jitter > 0 else
-        "Every box has its type's exact size (`generate.size_jitter` = 0, the paper's three "
-        "sizes).") + carton_note
+        f"splits hold the exact sizes."
+        if jitter > 0
+        else "Every box has its type's exact size (`generate.size_jitter` = 0, the paper's three "
+        "sizes)."
+    ) + carton_note
     return [
         "## Dataset",
         "",
@@ -203,8 +263,9 @@ def render_dataset(info: DatasetInfo, tables: dict[str, Table]) -> list[str]:
         f"outside the bin and were deleted before rendering. *Scenes at the step cap* did not "
         f"come to rest within `physics.max_settle_steps` = {cap} steps "
         f"({cap * dt:.1f} s). Settle steps are physics steps of {step_unit(dt)} "
-        "from the first drop until the heap is at rest." if cap is not None else
-        "*Boxes* are the boxes at rest in the bin (ground truth).",
+        "from the first drop until the heap is at rest."
+        if cap is not None
+        else "*Boxes* are the boxes at rest in the bin (ground truth).",
         "",
         "### Box types",
         "",
@@ -224,8 +285,13 @@ class DatasetSection(Section):
     def resolve(self, ctx: Context) -> DatasetInfo:
         """The generation artifact (verified); raises ``ArtifactError`` when there is none. Also
         checks ``report.num_sample_images``."""
-        folder = resolve_artifact(ctx.root, "generate", ctx.requested("generate"), verify=True,
-                                  key="report.generate_version")
+        folder = resolve_artifact(
+            ctx.root,
+            "generate",
+            ctx.requested("generate"),
+            verify=True,
+            key="report.generate_version",
+        )
         manifest = load_manifest(folder)
         info = DatasetInfo(folder, manifest, split_metrics(manifest, folder))
         if ctx.num_samples < 0:
@@ -233,31 +299,43 @@ class DatasetSection(Section):
         return info
 
     def tables(self, info: DatasetInfo, ctx: Context) -> list[Table]:
-        return [splits_table(info.splits, info.stats, time_step(info.config)),
-                box_types_table(info.stats)]
+        return [
+            splits_table(info.splits, info.stats, time_step(info.config)),
+            box_types_table(info.stats),
+        ]
 
     def figures(self, info: DatasetInfo, ctx: Context, folder: Path) -> dict[str, str]:
         figures = {}
         if ctx.num_samples > 0:
-            split, drawn = figure_sample_depth(info.folder, ctx.num_samples,
-                                               folder / "figures" / "sample_depth.png")
+            split, drawn = figure_sample_depth(
+                info.folder, ctx.num_samples, folder / "figures" / "sample_depth.png"
+            )
             figures["figures/sample_depth.png"] = (
                 f"{drawn} depth images of the {split} split (colour: depth in metres; grey: no "
-                "data; white: box outlines) with their instance masks." if drawn
-                else "No scenes to draw.")
-        max_count = int(info.config.get("boxes", {}).get(
-            "max_count", max(len(m.get("boxes_per_scene_histogram", [0]))
-                             for m in info.splits.values()) - 1))
-        figure_boxes_per_scene(info.splits, max_count,
-                               folder / "figures" / "boxes_per_scene.png")
+                "data; white: box outlines) with their instance masks."
+                if drawn
+                else "No scenes to draw."
+            )
+        max_count = int(
+            info.config.get("boxes", {}).get(
+                "max_count",
+                max(len(m.get("boxes_per_scene_histogram", [0])) for m in info.splits.values()) - 1,
+            )
+        )
+        figure_boxes_per_scene(info.splits, max_count, folder / "figures" / "boxes_per_scene.png")
         figures["figures/boxes_per_scene.png"] = (
-            "Boxes at rest per scene, all splits stacked (from the generation manifest).")
+            "Boxes at rest per scene, all splits stacked (from the generation manifest)."
+        )
         return figures
 
-    def markdown(self, info: DatasetInfo, tables: dict[str, Table],
-                 figures: dict[str, str]) -> list[str]:
+    def markdown(
+        self, info: DatasetInfo, tables: dict[str, Table], figures: dict[str, str]
+    ) -> list[str]:
         return render_dataset(info, tables)
 
     def metrics(self, info: DatasetInfo) -> dict[str, Any]:
-        return {"generate_version": info.version, "scenes": dict(info.stats.scenes),
-                "boxes": dict(info.stats.boxes)}
+        return {
+            "generate_version": info.version,
+            "scenes": dict(info.stats.scenes),
+            "boxes": dict(info.stats.boxes),
+        }

@@ -13,22 +13,26 @@ import matplotlib
 
 matplotlib.use("Agg")
 
-import numpy as np  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
-from matplotlib.ticker import MaxNLocator  # noqa: E402
+import numpy as np
+from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
 
-from pipeline.dataset.scenes import SPLITS, SceneDataset  # noqa: E402
-from pipeline.dataset.labels import LabelSet  # noqa: E402
-from pipeline.labelling.types import CLASS_COLORS  # noqa: E402
-from pipeline.labelling.types import GraspClass  # noqa: E402
+from pipeline.dataset.labels import LabelSet
+from pipeline.dataset.scenes import SPLITS, SceneDataset
+from pipeline.grasping.types import CLASS_COLORS, GraspClass
 
 FIG_DPI = 100
 # PNG text chunks: matplotlib writes "Software: matplotlib version ..." unless told not to.
 PNG_METADATA = {"Software": None}
 NO_DATA = "#5c3a21"  # depth pixels without a value, in the labels figure (brown)
 SENSOR_NO_DATA = "#e4007c"  # depth pixels without a value, in the sensor-depth figure (magenta)
-CLASS_MEANING = {GraspClass.R: "right cup", GraspClass.L: "left cup", GraspClass.B: "both cups",
-                 GraspClass.NG: "not graspable"}
+CLASS_MEANING = {
+    GraspClass.R: "right cup",
+    GraspClass.L: "left cup",
+    GraspClass.B: "both cups",
+    GraspClass.NG: "not graspable",
+}
+
 
 def _save(fig: Figure, path: Path) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -87,8 +91,9 @@ def figure_sample_depth(gen_dir: Path, num: int, path: Path) -> tuple[str | None
     vmin, vmax = _depth_range(scenes)
     pairs_per_row = min(3, n)
     rows = math.ceil(n / pairs_per_row)
-    fig = Figure(figsize=(4.4 * pairs_per_row + 1.2, 2.4 * rows + 0.5), dpi=FIG_DPI,
-                 layout="constrained")
+    fig = Figure(
+        figsize=(4.4 * pairs_per_row + 1.2, 2.4 * rows + 0.5), dpi=FIG_DPI, layout="constrained"
+    )
     axes = fig.subplots(rows, 2 * pairs_per_row, squeeze=False)
     cmap = matplotlib.colormaps["viridis"].with_extremes(bad="0.75")
     im = None
@@ -108,8 +113,9 @@ def figure_sample_depth(gen_dir: Path, num: int, path: Path) -> tuple[str | None
         ax_m.set_title("instance mask", fontsize=8)
     cb = fig.colorbar(im, ax=axes.ravel().tolist(), shrink=0.9)
     cb.set_label("depth (m)")
-    fig.suptitle(f"Sample depth images ({split} split; grey = no data, white = box outlines)",
-                 fontsize=9)
+    fig.suptitle(
+        f"Sample depth images ({split} split; grey = no data, white = box outlines)", fontsize=9
+    )
     _save(fig, path)
     return split, n
 
@@ -126,9 +132,15 @@ def figure_boxes_per_scene(splits: dict[str, dict], max_count: int, path: Path) 
         if not hist:
             continue
         h = np.zeros(max_count + 1)
-        h[:min(len(hist), max_count + 1)] = hist[:max_count + 1]
-        ax.bar(x, h, bottom=bottom, color=colour, label=f"{split} ({splits[split]['scenes']})",
-               width=0.85)
+        h[: min(len(hist), max_count + 1)] = hist[: max_count + 1]
+        ax.bar(
+            x,
+            h,
+            bottom=bottom,
+            color=colour,
+            label=f"{split} ({splits[split]['scenes']})",
+            width=0.85,
+        )
         bottom += h
         drawn = True
     ax.set_xlabel("boxes at rest in the bin per scene")
@@ -144,8 +156,9 @@ def figure_boxes_per_scene(splits: dict[str, dict], max_count: int, path: Path) 
     _save(fig, path)
 
 
-def figure_labels_sample(gen_dir: Path, label_dir: Path, num: int, path: Path
-                         ) -> tuple[str | None, int]:
+def figure_labels_sample(
+    gen_dir: Path, label_dir: Path, num: int, path: Path
+) -> tuple[str | None, int]:
     """Depth images with their grasp points coloured by final class (like the paper's Fig. 4f).
 
     Draws the first ``num`` scenes of the test split (else train, else val) with the labels of
@@ -178,23 +191,53 @@ def figure_labels_sample(gen_dir: Path, label_dir: Path, num: int, path: Path
         uv, cls = rows_i["uv"], rows_i["grasp_class"].astype(np.int64)
         totals += np.bincount(cls, minlength=len(GraspClass))
         H, W = scene.depth_m.shape
-        ax.imshow(np.where(scene.depth_m > 0, scene.depth_m, np.nan), cmap=cmap, vmin=vmin,
-                  vmax=vmax, interpolation="nearest")
+        ax.imshow(
+            np.where(scene.depth_m > 0, scene.depth_m, np.nan),
+            cmap=cmap,
+            vmin=vmin,
+            vmax=vmax,
+            interpolation="nearest",
+        )
         for c in GraspClass:
             sel = cls == c
             if sel.any():
-                ax.scatter(uv[sel, 0], uv[sel, 1], s=26, color=colours[c], edgecolors="black",
-                           linewidths=0.6, zorder=3)
+                ax.scatter(
+                    uv[sel, 0],
+                    uv[sel, 1],
+                    s=26,
+                    color=colours[c],
+                    edgecolors="black",
+                    linewidths=0.6,
+                    zorder=3,
+                )
         ax.set_xlim(-0.5, W - 0.5)
         ax.set_ylim(H - 0.5, -0.5)
         ax.set_title(f"{split} #{scene.index}: {len(cls)} grasp points", fontsize=8)
-    handles = [Line2D([], [], linestyle="", marker="o", markersize=7, color=colours[c],
-                      markeredgecolor="black", label=f"{c.name}: {CLASS_MEANING[c]} ({totals[c]})")
-               for c in GraspClass]
-    fig.legend(handles=handles, loc="outside lower center", ncols=len(handles), fontsize=8,
-               title="class after the robot-level check (grasp points drawn)", title_fontsize=8)
-    fig.suptitle(f"Grasp points on {split} depth images "
-                 "(light = near, dark = far, brown = no data)", fontsize=9)
+    handles = [
+        Line2D(
+            [],
+            [],
+            linestyle="",
+            marker="o",
+            markersize=7,
+            color=colours[c],
+            markeredgecolor="black",
+            label=f"{c.name}: {CLASS_MEANING[c]} ({totals[c]})",
+        )
+        for c in GraspClass
+    ]
+    fig.legend(
+        handles=handles,
+        loc="outside lower center",
+        ncols=len(handles),
+        fontsize=8,
+        title="class after the robot-level check (grasp points drawn)",
+        title_fontsize=8,
+    )
+    fig.suptitle(
+        f"Grasp points on {split} depth images (light = near, dark = far, brown = no data)",
+        fontsize=9,
+    )
     _save(fig, path)
     return split, n
 
@@ -229,8 +272,13 @@ PLANNER_STYLE = {  # Table 2 / Fig. 10 planners: (colour, marker, legend label)
 }
 
 
-def figure_table2_curve(radii: np.ndarray, rates: dict[str, np.ndarray], path: Path,
-                        paper: dict[str, float], paper_radius: float) -> None:
+def figure_table2_curve(
+    radii: np.ndarray,
+    rates: dict[str, np.ndarray],
+    path: Path,
+    paper: dict[str, float],
+    paper_radius: float,
+) -> None:
     """Share of test images whose optimal grasp point lies within r px of a true surface centre,
     per planner, over r (the baseline's ``table2_curve.csv``), with the paper's 30-px values."""
     fig = Figure(figsize=(5.6, 4.0), dpi=FIG_DPI, layout="constrained")
@@ -238,13 +286,27 @@ def figure_table2_curve(radii: np.ndarray, rates: dict[str, np.ndarray], path: P
     for name, rate in rates.items():
         colour, marker, label = PLANNER_STYLE.get(name, ("black", ".", name))
         ax.plot(radii, 100.0 * np.asarray(rate), color=colour, lw=1.5, label=label)
-    paper_style = {"ours": ("tab:blue", "paper: ours"), "dexnet4": ("tab:red", "paper: Dex-Net 4.0")}
+    paper_style = {
+        "ours": ("tab:blue", "paper: ours"),
+        "dexnet4": ("tab:red", "paper: Dex-Net 4.0"),
+    }
     for key, value in paper.items():
         colour, label = paper_style.get(key, ("black", f"paper: {key}"))
-        ax.scatter([paper_radius], [100.0 * value], color=colour, marker="*", s=120,
-                   edgecolors="black", linewidths=0.6, zorder=4, label=label)
+        ax.scatter(
+            [paper_radius],
+            [100.0 * value],
+            color=colour,
+            marker="*",
+            s=120,
+            edgecolors="black",
+            linewidths=0.6,
+            zorder=4,
+            label=label,
+        )
     ax.axvline(paper_radius, color="grey", lw=0.8, ls="--")
-    ax.set_xlim(float(radii.min()) if len(radii) else 0.0, float(radii.max()) if len(radii) else 1.0)
+    ax.set_xlim(
+        float(radii.min()) if len(radii) else 0.0, float(radii.max()) if len(radii) else 1.0
+    )
     ax.set_ylim(0.0, 101.0)
     ax.set_xlabel("radius r (pixels)")
     ax.set_ylabel("optimal points within r of a true surface centre (%)")
@@ -254,8 +316,9 @@ def figure_table2_curve(radii: np.ndarray, rates: dict[str, np.ndarray], path: P
     _save(fig, path)
 
 
-def figure_planner_points(gen_dir: Path, chosen: dict[str, np.ndarray], planners: list[str],
-                          num: int, path: Path) -> int:
+def figure_planner_points(
+    gen_dir: Path, chosen: dict[str, np.ndarray], planners: list[str], num: int, path: Path
+) -> int:
     """Fig. 10-like: test depth images with every planner's optimal grasp point and the true
     surface centres (white crosses). ``chosen``: the baseline's ``chosen.npz``. Returns the
     number of images drawn."""
@@ -281,26 +344,56 @@ def figure_planner_points(gen_dir: Path, chosen: dict[str, np.ndarray], planners
     for i, scene in enumerate(scenes):
         ax = axes.ravel()[i]
         H, W = scene.depth_m.shape
-        ax.imshow(np.where(scene.depth_m > 0, scene.depth_m, np.nan), cmap=cmap, vmin=vmin,
-                  vmax=vmax, interpolation="nearest")
-        centres = chosen["centres"][starts[i]:starts[i + 1]]
-        ax.scatter(centres[:, 0], centres[:, 1], marker="+", s=30, color="white", lw=1.0,
-                   zorder=3)
+        ax.imshow(
+            np.where(scene.depth_m > 0, scene.depth_m, np.nan),
+            cmap=cmap,
+            vmin=vmin,
+            vmax=vmax,
+            interpolation="nearest",
+        )
+        centres = chosen["centres"][starts[i] : starts[i + 1]]
+        ax.scatter(centres[:, 0], centres[:, 1], marker="+", s=30, color="white", lw=1.0, zorder=3)
         for name in planners:
             uv = chosen[f"{name}_uv"][i]
             if np.all(np.isfinite(uv)):
                 colour, marker, _ = PLANNER_STYLE.get(name, ("black", ".", name))
-                ax.scatter([uv[0]], [uv[1]], marker=marker, s=70, color=colour,
-                           edgecolors="black", linewidths=0.7, zorder=4)
+                ax.scatter(
+                    [uv[0]],
+                    [uv[1]],
+                    marker=marker,
+                    s=70,
+                    color=colour,
+                    edgecolors="black",
+                    linewidths=0.7,
+                    zorder=4,
+                )
         ax.set_xlim(-0.5, W - 0.5)
         ax.set_ylim(H - 0.5, -0.5)
         ax.set_title(f"test #{scene.index}", fontsize=8)
-    handles = [Line2D([], [], linestyle="", marker="+", markersize=8, color="black",
-                      label="true surface centres")]
-    handles += [Line2D([], [], linestyle="", marker=PLANNER_STYLE.get(p, ("k", ".", p))[1],
-                       markersize=8, color=PLANNER_STYLE.get(p, ("black", ".", p))[0],
-                       markeredgecolor="black", label=PLANNER_STYLE.get(p, ("k", ".", p))[2])
-                for p in planners]
+    handles = [
+        Line2D(
+            [],
+            [],
+            linestyle="",
+            marker="+",
+            markersize=8,
+            color="black",
+            label="true surface centres",
+        )
+    ]
+    handles += [
+        Line2D(
+            [],
+            [],
+            linestyle="",
+            marker=PLANNER_STYLE.get(p, ("k", ".", p))[1],
+            markersize=8,
+            color=PLANNER_STYLE.get(p, ("black", ".", p))[0],
+            markeredgecolor="black",
+            label=PLANNER_STYLE.get(p, ("k", ".", p))[2],
+        )
+        for p in planners
+    ]
     fig.legend(handles=handles, loc="outside lower center", ncols=len(handles), fontsize=8)
     fig.suptitle("Optimal grasp points of each planner (paper Fig. 10; light = near)", fontsize=9)
     _save(fig, path)
@@ -325,10 +418,21 @@ def figure_servo_convergence(csv_path: Path, path: Path) -> None:
         t = [float(r["t_s"]) for r in rs]
         label = None if planner in seen else planner
         seen.add(planner)
-        ax_t.plot(t, [float(r["translation_error"]) for r in rs], color=colours.get(planner, "k"),
-                  lw=0.8, alpha=0.7, label=label)
-        ax_r.plot(t, [float(r["rotation_error_deg"]) for r in rs],
-                  color=colours.get(planner, "k"), lw=0.8, alpha=0.7)
+        ax_t.plot(
+            t,
+            [float(r["translation_error"]) for r in rs],
+            color=colours.get(planner, "k"),
+            lw=0.8,
+            alpha=0.7,
+            label=label,
+        )
+        ax_r.plot(
+            t,
+            [float(r["rotation_error_deg"]) for r in rs],
+            color=colours.get(planner, "k"),
+            lw=0.8,
+            alpha=0.7,
+        )
     for ax, name in ((ax_t, "|p_e − p_e*| (normalised)"), (ax_r, "|uθ| (degrees)")):
         ax.set_yscale("log")
         ax.set_xlabel("simulated time (s)")
@@ -342,8 +446,9 @@ def figure_servo_convergence(csv_path: Path, path: Path) -> None:
     _save(fig, path)
 
 
-def figure_sensor_depth(gen_dir: Path, filter_cfg, filter_name: str, sensor_name: str,
-                        path: Path) -> int | None:
+def figure_sensor_depth(
+    gen_dir: Path, filter_cfg, filter_name: str, sensor_name: str, path: Path
+) -> int | None:
     """The first test image of a generation artifact made with a sensor model, in three panels:
     the ideal depth (``Scene.depth_clean_m``), the sensor's depth (``Scene.depth_m``) and that
     depth after the preprocessing ``filter_cfg`` (``pipeline.camera.depth_filter``; its name
@@ -358,9 +463,11 @@ def figure_sensor_depth(gen_dir: Path, filter_cfg, filter_name: str, sensor_name
         _save(fig, path)
         return None
     scene = ds[0]
-    panels = (("ideal depth", scene.depth_clean_m),
-              (f"{sensor_name} model", scene.depth_m),
-              (f"{sensor_name} model + {filter_name}", preprocess_depth(scene.depth_m, filter_cfg)))
+    panels = (
+        ("ideal depth", scene.depth_clean_m),
+        (f"{sensor_name} model", scene.depth_m),
+        (f"{sensor_name} model + {filter_name}", preprocess_depth(scene.depth_m, filter_cfg)),
+    )
     valid = scene.depth_clean_m[scene.depth_clean_m > 0]
     vmin, vmax = (float(valid.min()), float(valid.max())) if valid.size else (0.0, 1.0)
     vmax = vmax if vmax > vmin else vmin + 1e-3
@@ -371,13 +478,20 @@ def figure_sensor_depth(gen_dir: Path, filter_cfg, filter_name: str, sensor_name
     for ax, (title, depth) in zip(axes, panels):
         depth = np.asarray(depth, np.float32)
         missing = float(np.mean(depth <= 0))
-        im = ax.imshow(np.where(depth > 0, depth, np.nan), cmap=cmap, vmin=vmin, vmax=vmax,
-                       interpolation="nearest")
+        im = ax.imshow(
+            np.where(depth > 0, depth, np.nan),
+            cmap=cmap,
+            vmin=vmin,
+            vmax=vmax,
+            interpolation="nearest",
+        )
         ax.set_title(f"{title}: {100.0 * missing:.1f} % of pixels without data", fontsize=8)
         ax.set_axis_off()
     cb = fig.colorbar(im, ax=list(axes), shrink=0.9)
     cb.set_label("depth (m)")
-    fig.suptitle(f"Ideal vs. sensor-model depth, test #{scene.index} "
-                 "(magenta = no data; one colour scale)", fontsize=9)
+    fig.suptitle(
+        f"Ideal vs. sensor-model depth, test #{scene.index} (magenta = no data; one colour scale)",
+        fontsize=9,
+    )
     _save(fig, path)
     return scene.index

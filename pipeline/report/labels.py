@@ -20,7 +20,7 @@ import numpy as np
 from pipeline.artifacts import ArtifactError
 from pipeline.dataset.labels import LabelSet
 from pipeline.dataset.scenes import SPLITS
-from pipeline.labelling.types import NG_REASONS, GraspClass
+from pipeline.grasping.types import NG_REASONS, GraspClass
 from pipeline.report.dataset import DatasetStats
 from pipeline.report.figures import CLASS_MEANING, figure_labels_sample
 from pipeline.report.section import Context, Section
@@ -30,12 +30,22 @@ from pipeline.report.upstream import ArtifactInfo, Match, resolve_upstream
 LABEL_SECTION = "Labels (paper Sec. 4.3, Figs. 4–6)"
 LABEL_NOT_RUN = "Labelling: not run yet (`make label`)."
 LABEL_FIGURE = "figures/labels_sample.png"
-# Where each NG reason is decided (pipeline.label): the hand level looks at the surface alone,
+# Where each NG reason is decided (pipeline.stages.label): the hand level looks at the surface
+# alone,
 # the robot level at the whole robot in the scene.
-NG_REASON_LEVEL = {"too_small": "hand", "center_occluded": "hand", "ik": "robot",
-                   "joint_limits": "robot", "collision": "robot", "path_collision": "robot",
-                   "path_joint_limits": "robot", "path_timeout": "robot", "path_lost": "robot",
-                   "hold": "hand", "press": "robot"}
+NG_REASON_LEVEL = {
+    "too_small": "hand",
+    "center_occluded": "hand",
+    "ik": "robot",
+    "joint_limits": "robot",
+    "collision": "robot",
+    "path_collision": "robot",
+    "path_joint_limits": "robot",
+    "path_timeout": "robot",
+    "path_lost": "robot",
+    "hold": "hand",
+    "press": "robot",
+}
 NG_REASON_MEANING = {
     "too_small": "the cups do not fit on the visible surface",
     "center_occluded": "the centre of the visible region lies on another box",
@@ -43,20 +53,23 @@ NG_REASON_MEANING = {
     "joint_limits": "it is reached only outside the joint limits",
     "collision": "it is reached only with the arm or hand touching the bin or another box",
     "path_collision": "the pose is clear, but the servo's motion from home touches the bin, "
-                      "another box or the robot itself",
+    "another box or the robot itself",
     "path_joint_limits": "the servo from home, predicted on the exact surface, runs into the "
-                         "joint limits",
+    "joint limits",
     "path_timeout": "the servo from home, predicted on the exact surface, does not converge "
-                    "in time",
+    "in time",
     "path_lost": "the servo from home, predicted on the exact surface, loses sight of it",
     "hold": "the cups fit, but would not hold the box's weight (hold test; hand.hold_check)",
     "press": "the pose is clear, but the final press along the camera's axis brings the hand "
-             "or the arm onto the bin",
+    "or the arm onto the bin",
 }
 # (manifest key, column header, Markdown format) of the surface-accuracy table.
 ACCURACY_COLUMNS = (
-    ("images", "images", ""), ("found", "found", ""), ("missed", "missed", ""),
-    ("spurious", "spurious", ""), ("precision", "precision", "{:.3f}"),
+    ("images", "images", ""),
+    ("found", "found", ""),
+    ("missed", "missed", ""),
+    ("spurious", "spurious", ""),
+    ("precision", "precision", "{:.3f}"),
     ("recall", "recall", "{:.3f}"),
     ("center_err_px_median", "centre error median (px)", "{:.3f}"),
     ("center_err_px_p90", "centre error p90 (px)", "{:.3f}"),
@@ -65,8 +78,14 @@ ACCURACY_COLUMNS = (
     ("normal_err_deg_median", "normal error median (deg)", "{:.3f}"),
     ("normal_err_deg_p90", "normal error p90 (deg)", "{:.3f}"),
 )
-SPLIT_KEYS = ("scenes", "grasp_points", "classes", "hand_level_classes", "ng_reasons",
-              "surface_accuracy")
+SPLIT_KEYS = (
+    "scenes",
+    "grasp_points",
+    "classes",
+    "hand_level_classes",
+    "ng_reasons",
+    "surface_accuracy",
+)
 
 
 @dataclass
@@ -91,7 +110,8 @@ class LabelInfo(ArtifactInfo):
                 f"{folder.name}/manifest.json (label) lacks metrics.splits.<split>.classes / "
                 "hand_level_classes / ng_reasons / surface_accuracy or metrics.surface_accuracy: "
                 "the label artifact predates the report's label section; recompute it with "
-                "`make label` (label.force=true).")
+                "`make label` (label.force=true)."
+            )
         return cls(folder, manifest, splits, accuracy)
 
 
@@ -99,15 +119,28 @@ def resolve_labels(root: Path, version: str, gen_version: str) -> LabelInfo | No
     """The label artifact to report, or None when ``version`` is "latest" and none exists.
 
     Raises ``ArtifactError`` when a named version does not exist, when the artifact was made from
-    another generation artifact than ``gen_version`` (or one with the same data), or when its manifest lacks the metrics.
+    another generation artifact than ``gen_version`` (or one with the same data), or when its
+    manifest lacks the metrics.
     """
-    return resolve_upstream(root, "label", version, LabelInfo.load, [Match(
-        "generate", gen_version, lambda name, theirs: (
-            f"label artifact {name} was made from generation artifact {theirs}, but the "
-            f"report reads generation artifact {gen_version}: pass matching versions "
-            f"(report.generate_version={theirs} report.label_version={name}), or rerun "
-            f"`make label` (label.generate_version={gen_version}) and then the report."),
-        stage_dir=root / "generate")])
+    return resolve_upstream(
+        root,
+        "label",
+        version,
+        LabelInfo.load,
+        [
+            Match(
+                "generate",
+                gen_version,
+                lambda name, theirs: (
+                    f"label artifact {name} was made from generation artifact {theirs}, but the "
+                    f"report reads generation artifact {gen_version}: pass matching versions "
+                    f"(report.generate_version={theirs} report.label_version={name}), or rerun "
+                    f"`make label` (label.generate_version={gen_version}) and then the report."
+                ),
+                stage_dir=root / "generate",
+            )
+        ],
+    )
 
 
 def check_labels(labels: LabelInfo, stats: DatasetStats) -> None:
@@ -124,13 +157,18 @@ def check_labels(labels: LabelInfo, stats: DatasetStats) -> None:
                 counts += np.bincount(ls[i]["grasp_class"], minlength=len(GraspClass))
             expected = [int(labels.splits[s]["classes"].get(c.name, 0)) for c in GraspClass]
             if counts.tolist() != expected:
-                problems.append(f"{s}: label files hold classes {counts.tolist()} (R, L, B, NG), "
-                                f"the manifest says {expected}")
+                problems.append(
+                    f"{s}: label files hold classes {counts.tolist()} (R, L, B, NG), "
+                    f"the manifest says {expected}"
+                )
     except (OSError, KeyError, ValueError) as e:
         problems.append(f"unreadable label files ({type(e).__name__}: {e})")
     if problems:
-        raise ArtifactError(f"label artifact {labels.version} is inconsistent ("
-                            + "; ".join(problems) + "); run `make verify`, then recompute it.")
+        raise ArtifactError(
+            f"label artifact {labels.version} is inconsistent ("
+            + "; ".join(problems)
+            + "); run `make verify`, then recompute it."
+        )
 
 
 def label_classes_table(labels: LabelInfo) -> Table:
@@ -139,8 +177,10 @@ def label_classes_table(labels: LabelInfo) -> Table:
     for c in GraspClass:
         headers += [c.name, f"{c.name} (%)"]
     rows = []
-    totals = {"hand_level_classes": np.zeros(len(GraspClass), np.int64),
-              "classes": np.zeros(len(GraspClass), np.int64)}
+    totals = {
+        "hand_level_classes": np.zeros(len(GraspClass), np.int64),
+        "classes": np.zeros(len(GraspClass), np.int64),
+    }
     n_scenes = 0
     for split in [*SPLITS, "all"]:
         if split != "all":
@@ -150,8 +190,9 @@ def label_classes_table(labels: LabelInfo) -> Table:
             if split == "all":
                 counts = totals[key]
             else:
-                counts = np.array([int(labels.splits[split][key].get(c.name, 0))
-                                   for c in GraspClass], np.int64)
+                counts = np.array(
+                    [int(labels.splits[split][key].get(c.name, 0)) for c in GraspClass], np.int64
+                )
                 totals[key] += counts
             total = int(counts.sum())
             row = [split, level, scenes, total, total / scenes if scenes else None]
@@ -170,8 +211,10 @@ def label_ng_reasons_table(labels: LabelInfo) -> Table:
     headers = ["NG reason", "level", *SPLITS, "all", "share of NG (%)"]
     per = {r: [int(labels.splits[s]["ng_reasons"].get(r, 0)) for s in SPLITS] for r in names}
     ng_total = sum(sum(v) for v in per.values())
-    rows = [[r, NG_REASON_LEVEL.get(r, NONE), *per[r], sum(per[r]), pct(sum(per[r]), ng_total)]
-            for r in names]
+    rows = [
+        [r, NG_REASON_LEVEL.get(r, NONE), *per[r], sum(per[r]), pct(sum(per[r]), ng_total)]
+        for r in names
+    ]
     split_totals = [sum(per[r][k] for r in names) for k in range(len(SPLITS))]
     rows.append(["total", "", *split_totals, ng_total, 100.0 if ng_total else None])
     formats = [""] * (len(headers) - 1) + ["{:.1f}"]
@@ -190,8 +233,9 @@ def surface_accuracy_table(labels: LabelInfo) -> Table:
     return Table("surface_accuracy", headers, rows, formats, csv_formats=[""] * len(headers))
 
 
-def render_labels(labels: LabelInfo | None, tables: dict[str, Table],
-                  figure: str | None) -> list[str]:
+def render_labels(
+    labels: LabelInfo | None, tables: dict[str, Table], figure: str | None
+) -> list[str]:
     """README lines of the labels section (``figure``: the sample-labels figure, if drawn)."""
     out = [f"## {LABEL_SECTION}", ""]
     if labels is None:
@@ -217,19 +261,25 @@ def render_labels(labels: LabelInfo | None, tables: dict[str, Table],
         "### NG reasons",
         "",
         "Grasp points labelled NG, by the check that failed: "
-        + "; ".join(f"*{r}* ({NG_REASON_LEVEL[r]} level): {m}"
-                    for r, m in NG_REASON_MEANING.items()) + ".",
+        + "; ".join(
+            f"*{r}* ({NG_REASON_LEVEL[r]} level): {m}" for r, m in NG_REASON_MEANING.items()
+        )
+        + ".",
         "",
         tables["label_ng_reasons"].markdown(),
         "### Surface detection accuracy",
         "",
         "Detected surfaces against the true visible faces computed from the simulator's box "
-        "poses" + (f" (faces with at least {surf['truth_min_visible_px']} visible pixels; a "
-                   f"match has the same box, centres within "
-                   f"{1000 * float(surf['match_max_center_dist']):g} mm and normals within "
-                   f"{float(surf['match_max_normal_deg']):g}°)"
-                   if {"truth_min_visible_px", "match_max_center_dist",
-                       "match_max_normal_deg"} <= set(surf) else "")
+        "poses"
+        + (
+            f" (faces with at least {surf['truth_min_visible_px']} visible pixels; a "
+            f"match has the same box, centres within "
+            f"{1000 * float(surf['match_max_center_dist']):g} mm and normals within "
+            f"{float(surf['match_max_normal_deg']):g}°)"
+            if {"truth_min_visible_px", "match_max_center_dist", "match_max_normal_deg"}
+            <= set(surf)
+            else ""
+        )
         + ". *Found*: matched true faces; *missed*: true faces without a detection; "
         "*spurious*: detections without a true face. Errors are over the matched pairs: "
         "the grasp point's distance in the image (px) and in 3-D (mm), and the angle between "
@@ -261,24 +311,39 @@ class LabelsSection(Section):
 
     def tables(self, info: LabelInfo, ctx: Context) -> list[Table]:
         check_labels(info, ctx.found["generate"].stats)
-        return [label_classes_table(info), label_ng_reasons_table(info),
-                surface_accuracy_table(info)]
+        return [
+            label_classes_table(info),
+            label_ng_reasons_table(info),
+            surface_accuracy_table(info),
+        ]
 
     def figures(self, info: LabelInfo, ctx: Context, folder: Path) -> dict[str, str]:
         if ctx.num_samples <= 0:
             return {}
-        split, drawn = figure_labels_sample(ctx.found["generate"].folder, info.folder,
-                                            ctx.num_samples, folder / LABEL_FIGURE)
-        return {LABEL_FIGURE: (
-            f"Grasp points of {drawn} depth images of the {split} split, coloured by their "
-            "class after the robot-level check (R red, L green, B blue, NG grey; paper "
-            "Fig. 4f)." if drawn else "No labelled scenes to draw.")}
+        split, drawn = figure_labels_sample(
+            ctx.found["generate"].folder, info.folder, ctx.num_samples, folder / LABEL_FIGURE
+        )
+        return {
+            LABEL_FIGURE: (
+                f"Grasp points of {drawn} depth images of the {split} split, coloured by their "
+                "class after the robot-level check (R red, L green, B blue, NG grey; paper "
+                "Fig. 4f)."
+                if drawn
+                else "No labelled scenes to draw."
+            )
+        }
 
-    def markdown(self, info: LabelInfo | None, tables: dict[str, Table],
-                 figures: dict[str, str]) -> list[str]:
+    def markdown(
+        self, info: LabelInfo | None, tables: dict[str, Table], figures: dict[str, str]
+    ) -> list[str]:
         return render_labels(info, tables, LABEL_FIGURE if LABEL_FIGURE in figures else None)
 
     def metrics(self, info: LabelInfo | None) -> dict[str, Any]:
-        return {"label_version": info.version if info is not None else None,
-                "grasp_points": ({s: int(info.splits[s]["grasp_points"]) for s in SPLITS}
-                                 if info is not None else None)}
+        return {
+            "label_version": info.version if info is not None else None,
+            "grasp_points": (
+                {s: int(info.splits[s]["grasp_points"]) for s in SPLITS}
+                if info is not None
+                else None
+            ),
+        }

@@ -20,8 +20,13 @@ def _commit(manifest: dict) -> str:
     return f"`{commit[:10]}`" + (" (+ uncommitted changes)" if code.get("dirty") else "")
 
 
-def render_readme(version: str, used: Sequence[Part], parts: Sequence[Part],
-                  tables: dict[str, Table], figures: dict[str, str]) -> str:
+def render_readme(
+    version: str,
+    used: Sequence[Part],
+    parts: Sequence[Part],
+    tables: dict[str, Table],
+    figures: dict[str, str],
+) -> str:
     """The README of report artifact ``version``.
 
     ``used``: the sections in the order of the "Artifacts used" table (the artifacts found,
@@ -31,7 +36,8 @@ def render_readme(version: str, used: Sequence[Part], parts: Sequence[Part],
     out = [
         "# Bin-picking reproduction: report",
         "",
-        f"Report artifact `{version}`, built by `python -m pipeline.report` (`make report`) from the "
+        f"Report artifact `{version}`, built by `python -m pipeline.report` (`make report`) "
+        "from the "
         "artifacts below. Every number here is computed from those artifacts; nothing is copied "
         "from the paper.",
         "",
@@ -53,10 +59,13 @@ def render_readme(version: str, used: Sequence[Part], parts: Sequence[Part],
         "",
     ]
     if "run_time" in tables:
-        out += ["How long each stage took to make these artifacts and those they were made from, "
-                "summed from their manifests on the machines that ran them: "
-                "[tables/run_time.csv](tables/run_time.csv) (wall-clock, so it is not part of the "
-                "reproducibility check).", ""]
+        out += [
+            "How long each stage took to make these artifacts and those they were made from, "
+            "summed from their manifests on the machines that ran them: "
+            "[tables/run_time.csv](tables/run_time.csv) (wall-clock, so it is not part of the "
+            "reproducibility check).",
+            "",
+        ]
     for section, info in parts:
         out += section.markdown(info, tables, figures)
     out += ["## Figures", ""]
@@ -65,8 +74,11 @@ def render_readme(version: str, used: Sequence[Part], parts: Sequence[Part],
     out += [
         "## Paper tables",
         "",
-        "".join(section.paper_table[0 if info is not None else 1]
-                for section, info in parts if section.paper_table is not None),
+        "".join(
+            section.paper_table[0 if info is not None else 1]
+            for section, info in parts
+            if section.paper_table is not None
+        ),
         "",
     ]
     return "\n".join(out)

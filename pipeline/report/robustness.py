@@ -1,6 +1,6 @@
 """Robustness section (Secs. 8.4, 8.5): sensor noise and the paper's failure cases, from the
 robustness artifact (``data/robustness/<version>``, ``report.robustness_version``; optional;
-``pipeline.robustness``), read from its ``robustness.json``.
+``pipeline.stages.robustness``), read from its ``robustness.json``.
 
 Tables ``robustness_sensor_model``, ``robustness_table1`` / ``robustness_table2`` (Tables 1 and
 2 per network and input), ``robustness_closed_loop`` (the closed-loop variants, each on its split:
@@ -23,38 +23,53 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 
 from pipeline.artifacts import ArtifactError, check_artifact
-from pipeline.cli import CONF_DIR
 from pipeline.report.baseline import TABLE2_SECTION
 from pipeline.report.figures import figure_sensor_depth
 from pipeline.report.section import Context, Section
 from pipeline.report.tables import (
-    Column, Table, book_columns, count_column, end_columns, failure_columns, integer, number,
-    pph_column, reason_column, table_of, text_column, times, within_key,
+    Column,
+    Table,
+    book_columns,
+    count_column,
+    end_columns,
+    failure_columns,
+    integer,
+    number,
+    pph_column,
+    reason_column,
+    table_of,
+    text_column,
+    times,
+    within_key,
 )
 from pipeline.report.training import TABLE1_COLUMNS, TABLE1_SECTION
 from pipeline.report.upstream import ArtifactInfo, resolve_upstream
+from pipeline.runtime.cli import CONF_DIR
 
 ROBUSTNESS_SECTION = "Robustness: sensor noise and the failure cases (Secs. 8.4, 8.5)"
-ROBUSTNESS_NOT_RUN = ("Robustness study: not run yet (`make robustness`, i.e. "
-                      "`python -m pipeline.robustness`).")
+ROBUSTNESS_NOT_RUN = (
+    "Robustness study: not run yet (`make robustness`, i.e. "
+    "`python -m pipeline.stages.robustness`)."
+)
 ROBUSTNESS_KEYS = ("table1", "table2", "closed_loop", "sensor", "artifacts")
 ROBUSTNESS_FIGURE = "figures/robustness_depth.png"
 ROBUSTNESS_FIGURE_FILTER = "fill_median"  # conf/depth_filter/<name>.yaml, the figure's 3rd panel
 MODEL_LABELS = {"clean": "clean-trained", "noisy": "noisy-trained"}
-ROBUSTNESS_PLANNERS = {"dcnn_clean": "ours (DCNN), clean-trained",
-                       "dcnn_noisy": "ours (DCNN), noisy-trained",
-                       "gqcnn": "Dex-Net-style GQ-CNN + CEM",
-                       "planarity": "Dex-Net-style planarity + CEM"}
+ROBUSTNESS_PLANNERS = {
+    "dcnn_clean": "ours (DCNN), clean-trained",
+    "dcnn_noisy": "ours (DCNN), noisy-trained",
+    "gqcnn": "Dex-Net-style GQ-CNN + CEM",
+    "planarity": "Dex-Net-style planarity + CEM",
+}
 REFERENCE_POLICY = "paper"  # the policy rows are compared with this variant
 SENSOR_MEANING = {  # pipeline.camera.sensor's parameters (SensorConfig); metres and degrees
     "name": "the sensor model (`conf/sensor/<name>.yaml`)",
     "enabled": "whether the model is applied (false: ideal depth)",
-    "noise_sigma_0": "σ0 (m) of the axial noise "
-                     "σ(z, θ) = σ0 + σ2·z² + σθ/√z · θ²/(π/2 − θ)²",
+    "noise_sigma_0": "σ0 (m) of the axial noise σ(z, θ) = σ0 + σ2·z² + σθ/√z · θ²/(π/2 − θ)²",
     "noise_sigma_2": "σ2 (m per m²): the noise growing with the square of depth",
     "noise_sigma_theta": "σθ (m·√m): the noise growing at grazing incidence θ",
     "projector_baseline": "projector–camera distance along x (m): projector shadows beside "
-                          "depth steps",
+    "depth steps",
     "dropout_angle_start_deg": "incidence angle (°) where steep-surface dropout starts",
     "dropout_angle_deg": "incidence angle (°) from which steep-surface dropout is certain",
     "min_range": "no data nearer than this (m)",
@@ -84,16 +99,20 @@ class RobustnessInfo(ArtifactInfo):
         try:
             # Python's json reads the NaN the study writes for undefined rates.
             data = json.loads((folder / "robustness.json").read_text())
-            complete = (isinstance(data, dict) and set(ROBUSTNESS_KEYS) <= set(data)
-                        and all(isinstance(data[k], list) for k in ROBUSTNESS_KEYS[:3])
-                        and all(isinstance(data[k], dict) for k in ROBUSTNESS_KEYS[3:]))
+            complete = (
+                isinstance(data, dict)
+                and set(ROBUSTNESS_KEYS) <= set(data)
+                and all(isinstance(data[k], list) for k in ROBUSTNESS_KEYS[:3])
+                and all(isinstance(data[k], dict) for k in ROBUSTNESS_KEYS[3:])
+            )
         except (OSError, ValueError):
             complete = False
         if not complete:
             raise ArtifactError(
                 f"{folder.name}/robustness.json (robustness) is missing or lacks "
                 f"{' / '.join(ROBUSTNESS_KEYS)}: recompute it with `make robustness` "
-                "(robustness.force=true).")
+                "(robustness.force=true)."
+            )
         return cls(folder, manifest, data)
 
 
@@ -126,38 +145,76 @@ def filter_config(name: str) -> DictConfig:
 def robustness_table1_table(info: RobustnessInfo) -> Table:
     """Table 1 of each network on each input (percent; CSV with 4 decimals)."""
     headers = ["network", "input", *(h for _, h in TABLE1_COLUMNS), "predictions", "images"]
-    rows = [[MODEL_LABELS.get(str(r.get("model")), str(r.get("model"))), str(r.get("input")),
-             *(times(r.get(k)) for k, _ in TABLE1_COLUMNS), integer(r.get("predictions")),
-             integer(r.get("images"))] for r in info.data["table1"]]
+    rows = [
+        [
+            MODEL_LABELS.get(str(r.get("model")), str(r.get("model"))),
+            str(r.get("input")),
+            *(times(r.get(k)) for k, _ in TABLE1_COLUMNS),
+            integer(r.get("predictions")),
+            integer(r.get("images")),
+        ]
+        for r in info.data["table1"]
+    ]
     n = len(TABLE1_COLUMNS)
-    return Table("robustness_table1", headers, rows, ["", ""] + ["{:.2f} %"] * n + ["{}", "{}"],
-                 csv_formats=["", ""] + ["{:.4f}"] * n + ["{}", "{}"], text_columns=2)
+    return Table(
+        "robustness_table1",
+        headers,
+        rows,
+        ["", ""] + ["{:.2f} %"] * n + ["{}", "{}"],
+        csv_formats=["", ""] + ["{:.4f}"] * n + ["{}", "{}"],
+        text_columns=2,
+    )
 
 
 def robustness_table2_table(info: RobustnessInfo) -> Table:
     """Table 2 of each planner on each input: share of images within the radius (percent)."""
     rows_in = info.data["table2"]
     key, radius = within_key(rows_in)
-    headers = ["planner", "input", "images", f"within {radius} px", "no grasp",
-               "median distance (px)"]
-    rows = [[ROBUSTNESS_PLANNERS.get(str(r.get("planner")), str(r.get("planner"))),
-             str(r.get("input")), integer(r.get("images")), times(r.get(key)),
-             integer(r.get("no_grasp")), number(r.get("median_distance_px"))] for r in rows_in]
-    return Table("robustness_table2", headers, rows,
-                 ["", "", "{}", "{:.2f} %", "{}", "{:.1f}"],
-                 csv_formats=["", "", "{}", "{:.4f}", "{}", "{:.3f}"], text_columns=2)
+    headers = [
+        "planner",
+        "input",
+        "images",
+        f"within {radius} px",
+        "no grasp",
+        "median distance (px)",
+    ]
+    rows = [
+        [
+            ROBUSTNESS_PLANNERS.get(str(r.get("planner")), str(r.get("planner"))),
+            str(r.get("input")),
+            integer(r.get("images")),
+            times(r.get(key)),
+            integer(r.get("no_grasp")),
+            number(r.get("median_distance_px")),
+        ]
+        for r in rows_in
+    ]
+    return Table(
+        "robustness_table2",
+        headers,
+        rows,
+        ["", "", "{}", "{:.2f} %", "{}", "{:.1f}"],
+        csv_formats=["", "", "{}", "{:.4f}", "{}", "{:.3f}"],
+        text_columns=2,
+    )
 
 
 def closed_loop_columns() -> list[Column]:
     """The closed-loop variants' columns: the variant, its network, overrides, split and
     trials, success rate and boxes picked with their 95 % intervals, PPH, failures by kind, how
     the trials ended, and why a variant made no attempt."""
-    return [text_column("variant", "variant"),
-            Column("network", lambda r: MODEL_LABELS.get(str(r.get("model")),
-                                                         str(r.get("model")))),
-            Column("overrides", lambda r: str(r.get("overrides") or "-")),
-            text_column("split", "split"), count_column("trials", "trials"),
-            *book_columns(), pph_column(), *failure_columns(), *end_columns(), reason_column()]
+    return [
+        text_column("variant", "variant"),
+        Column("network", lambda r: MODEL_LABELS.get(str(r.get("model")), str(r.get("model")))),
+        Column("overrides", lambda r: str(r.get("overrides") or "-")),
+        text_column("split", "split"),
+        count_column("trials", "trials"),
+        *book_columns(),
+        pph_column(),
+        *failure_columns(),
+        *end_columns(),
+        reason_column(),
+    ]
 
 
 def robustness_closed_loop_table(info: RobustnessInfo) -> Table:
@@ -183,10 +240,20 @@ def robustness_policies_table(info: RobustnessInfo) -> Table:
     ref = next((r for r in policy if r.get("variant") == REFERENCE_POLICY), None)
     *columns, reason = closed_loop_columns()
     columns += [
-        Column(f"success rate vs. {REFERENCE_POLICY} (pp)",
-               lambda r: _versus(r, ref, "success_rate", 100.0), "{:+.1f}", csv_fmt="{:.4f}"),
-        Column(f"PPH vs. {REFERENCE_POLICY}", lambda r: _versus(r, ref, "pph_motion", 1.0),
-               "{:+.1f}", csv_fmt="{:.1f}"), reason]
+        Column(
+            f"success rate vs. {REFERENCE_POLICY} (pp)",
+            lambda r: _versus(r, ref, "success_rate", 100.0),
+            "{:+.1f}",
+            csv_fmt="{:.4f}",
+        ),
+        Column(
+            f"PPH vs. {REFERENCE_POLICY}",
+            lambda r: _versus(r, ref, "pph_motion", 1.0),
+            "{:+.1f}",
+            csv_fmt="{:.1f}",
+        ),
+        reason,
+    ]
     return table_of("robustness_policies", columns, policy, text_columns=3)
 
 
@@ -194,10 +261,13 @@ def robustness_failures_table(info: RobustnessInfo) -> Table:
     """Failed attempts by kind of every closed-loop variant (the ``fail_*`` columns)."""
     rows_in = info.data["closed_loop"]
     kinds = list(dict.fromkeys(k for r in rows_in for k in r if k.startswith("fail_")))
-    rows = [[str(r.get("group")), str(r.get("variant")), *(integer(r.get(k)) for k in kinds)]
-            for r in rows_in]
-    return Table("robustness_failures", ["group", "variant", *(k[5:] for k in kinds)], rows,
-                 text_columns=2)
+    rows = [
+        [str(r.get("group")), str(r.get("variant")), *(integer(r.get(k)) for k in kinds)]
+        for r in rows_in
+    ]
+    return Table(
+        "robustness_failures", ["group", "variant", *(k[5:] for k in kinds)], rows, text_columns=2
+    )
 
 
 def _param_value(value: Any) -> str:
@@ -211,8 +281,7 @@ def _param_value(value: Any) -> str:
 def robustness_sensor_table(info: RobustnessInfo) -> Table:
     """The sensor model's parameters, as the study recorded them."""
     rows = [[k, _param_value(v), SENSOR_MEANING.get(k)] for k, v in info.data["sensor"].items()]
-    return Table("robustness_sensor_model", ["parameter", "value", "meaning"], rows,
-                 text_columns=3)
+    return Table("robustness_sensor_model", ["parameter", "value", "meaning"], rows, text_columns=3)
 
 
 def _input_meaning(name: str) -> str:
@@ -222,8 +291,10 @@ def _input_meaning(name: str) -> str:
         return "*sensor*: the sensor model's depth"
     head, _, filt = name.partition("+")
     if head == "sensor" and filt:
-        return (f"*{name}*: the sensor model's depth after `conf/depth_filter/{filt}.yaml` "
-                "(`pipeline/camera/depth_filter.py`)")
+        return (
+            f"*{name}*: the sensor model's depth after `conf/depth_filter/{filt}.yaml` "
+            "(`pipeline/camera/depth_filter.py`)"
+        )
     return f"*{name}*"
 
 
@@ -232,9 +303,13 @@ def missing_figure_note(info: RobustnessInfo) -> str:
     return (
         f"No depth figure: the study's noisy generation artifact "
         f"`{info.data['artifacts'].get('generate_noisy')}` "
-        + ("has no test images." if info.generation is not None else
-           "is not under `data/generate/` (rerun `make robustness`, which "
-           "recreates it, then the report)."))
+        + (
+            "has no test images."
+            if info.generation is not None
+            else "is not under `data/generate/` (rerun `make robustness`, which "
+            "recreates it, then the report)."
+        )
+    )
 
 
 def _closed_loop_note(rows: list[dict], trials: Any) -> str:
@@ -244,59 +319,57 @@ def _closed_loop_note(rows: list[dict], trials: Any) -> str:
     head = "The closed-loop variants are ordinary evaluation artifacts of the DCNN planner"
     splits = {r.get("split") for r in rows}
     if splits <= {None}:
-        return (head + (f" ({trials} trial{'' if trials == 1 else 's'} each)"
-                        if trials is not None else "")
-                + ", all on the same heaps and seeds; they differ only in the overrides shown.")
+        return (
+            head
+            + (f" ({trials} trial{'' if trials == 1 else 's'} each)" if trials is not None else "")
+            + ", all on the same heaps and seeds; they differ only in the overrides shown."
+        )
 
     def part(split: str) -> tuple[list[str], str]:
         """The split's variants and their trials ("1 trial each"; "" where none is known)."""
         mine = [r for r in rows if r.get("split") == split]
         counts = sorted({integer(r.get("trials")) for r in mine} - {None})
-        each = (f"{' or '.join(str(n) for n in counts)} trial{'' if counts == [1] else 's'} each"
-                if counts else "")
+        each = (
+            f"{' or '.join(str(n) for n in counts)} trial{'' if counts == [1] else 's'} each"
+            if counts
+            else ""
+        )
         return [f"`{r.get('variant')}`" for r in mine], each
 
     out = [head + ", each on one split of the evaluation's heaps (its `split` column)."]
     dev, each = part("dev")
     if dev:
-        out.append(f"The {len(dev)} dev variants" + (f" ({each})" if each else "")
-                   + " share the heaps development used and differ only in the overrides "
-                   "shown: they compare the variants.")
+        out.append(
+            f"The {len(dev)} dev variants"
+            + (f" ({each})" if each else "")
+            + " share the heaps development used and differ only in the overrides "
+            "shown: they compare the variants."
+        )
     test, each = part("test")
     if test:
-        out.append(f"The test variants ({', '.join(test)}" + (f"; {each}" if each else "")
-                   + ") run on Table 3's test heaps, which nothing is chosen on: the headline "
-                   "figures on this sensor.")
+        out.append(
+            f"The test variants ({', '.join(test)}"
+            + (f"; {each}" if each else "")
+            + ") run on Table 3's test heaps, which nothing is chosen on: the headline "
+            "figures on this sensor."
+        )
     return " ".join(out)
 
 
-def render_robustness(info: RobustnessInfo | None, tables: dict[str, Table],
-                      figure: str | None, figure_note: str | None = None) -> list[str]:
+def render_robustness(
+    info: RobustnessInfo | None,
+    tables: dict[str, Table],
+    figure: str | None,
+    figure_note: str | None = None,
+) -> list[str]:
     """README lines of the robustness section (``figure``: the depth figure, if drawn;
     ``figure_note``: why it was not)."""
     out = [f"## {ROBUSTNESS_SECTION}", ""]
     if info is None:
         return out + [ROBUSTNESS_NOT_RUN, ""]
-    data = info.data
-    cfg = (info.manifest.get("config") or {}).get("robustness") or {}
-    sensor = data["sensor"].get("name", cfg.get("sensor"))
-    arts = data["artifacts"]
-    inputs = list(dict.fromkeys(str(r.get("input")) for r in data["table1"] + data["table2"]))
-    images = sorted({integer(r.get("images")) for r in data["table1"]} - {None})
+    sensor = info.data["sensor"].get("name", _study_config(info).get("sensor"))
     out += [
-        f"Robustness artifact `{info.version}` (`python -m pipeline.robustness`): the method on "
-        f"depth from the `{sensor}` sensor model instead of the ideal rendered depth, with "
-        + (f"the network under test (*clean-trained*, train artifact `{arts.get('train_clean')}`)"
-           f" and one trained on the sensor's depth (*noisy-trained*, "
-           f"`{arts.get('train_noisy')}`)" if arts.get("train_noisy") else
-           f"the network under test alone (train artifact `{arts.get('train_clean')}`; no "
-           "network is trained for the sensor: `robustness.noisy_network=false`)")
-        + ". Tables 1 and 2 are measured on the test split of the "
-        f"noisy generation artifact `{arts.get('generate_noisy')}`"
-        + (f" ({', '.join(str(n) for n in images)} images)" if images else "")
-        + ", the same heaps as the clean one; the labels come from the ideal depth, so they "
-        "are the same for every input. Inputs: " + "; ".join(_input_meaning(n) for n in inputs)
-        + ". " + _closed_loop_note(data["closed_loop"], cfg.get("closed_loop_trials")),
+        _intro(info, sensor),
         "",
         "### Sensor model",
         "",
@@ -306,22 +379,25 @@ def render_robustness(info: RobustnessInfo | None, tables: dict[str, Table],
         tables["robustness_sensor_model"].markdown(),
     ]
     if figure:
-        out += ["The first test image's ideal depth, its depth from this model and that depth "
-                f"after `depth_filter={ROBUSTNESS_FIGURE_FILTER}`: [{figure}]({figure}).", ""]
+        out += [
+            "The first test image's ideal depth, its depth from this model and that depth "
+            f"after `depth_filter={ROBUSTNESS_FIGURE_FILTER}`: [{figure}]({figure}).",
+            "",
+        ]
     elif figure_note:
         out += [figure_note, ""]
     out += [
         "### Sensor noise: Table 1",
         "",
         "Precision (%) of each network's predictions per input (Table 1's definition, "
-        f"\"{TABLE1_SECTION}\").",
+        f'"{TABLE1_SECTION}").',
         "",
         tables["robustness_table1"].markdown(),
         "### Sensor noise: Table 2",
         "",
         "Share of test images whose optimal grasp point lies within the radius of a true "
         "surface centre, per planner and input (Table 2's measure, "
-        f"\"{TABLE2_SECTION}\"; an image without a grasp counts as a miss).",
+        f'"{TABLE2_SECTION}"; an image without a grasp counts as a miss).',
         "",
         tables["robustness_table2"].markdown(),
         "### Sensor noise: closed loop",
@@ -330,7 +406,7 @@ def render_robustness(info: RobustnessInfo | None, tables: dict[str, Table],
         "taken out / boxes dropped in, both with their Wilson 95 % score interval in brackets; "
         "PPH = successful picks per hour of simulated robot motion (what that time leaves out: "
         "Table 3's section); how the trials ended and the failed attempts by kind. A variant "
-        "with no attempt says why in its last column (how its trials ended; for \"no grasp\", "
+        'with no attempt says why in its last column (how its trials ended; for "no grasp", '
         "the planner's candidates and what rejected them).",
         "",
         tables["robustness_closed_loop"].markdown(),
@@ -346,12 +422,55 @@ def render_robustness(info: RobustnessInfo | None, tables: dict[str, Table],
         "",
         tables["robustness_failures"].markdown(),
         "CSV versions: "
-        + ", ".join(f"[tables/{n}.csv](tables/{n}.csv)" for n in (
-            "robustness_sensor_model", "robustness_table1", "robustness_table2",
-            "robustness_closed_loop", "robustness_policies", "robustness_failures")) + ".",
+        + ", ".join(
+            f"[tables/{n}.csv](tables/{n}.csv)"
+            for n in (
+                "robustness_sensor_model",
+                "robustness_table1",
+                "robustness_table2",
+                "robustness_closed_loop",
+                "robustness_policies",
+                "robustness_failures",
+            )
+        )
+        + ".",
         "",
     ]
     return out
+
+
+def _study_config(info: RobustnessInfo) -> dict:
+    return (info.manifest.get("config") or {}).get("robustness") or {}
+
+
+def _intro(info: RobustnessInfo, sensor: str) -> str:
+    """The section's first paragraph: the artifact, the networks, the inputs, the closed loop."""
+    data = info.data
+    cfg = _study_config(info)
+    arts = data["artifacts"]
+    inputs = list(dict.fromkeys(str(r.get("input")) for r in data["table1"] + data["table2"]))
+    images = sorted({integer(r.get("images")) for r in data["table1"]} - {None})
+    return (
+        f"Robustness artifact `{info.version}` (`python -m pipeline.stages.robustness`): "
+        "the method on "
+        f"depth from the `{sensor}` sensor model instead of the ideal rendered depth, with "
+        + (
+            f"the network under test (*clean-trained*, train artifact `{arts.get('train_clean')}`)"
+            f" and one trained on the sensor's depth (*noisy-trained*, "
+            f"`{arts.get('train_noisy')}`)"
+            if arts.get("train_noisy")
+            else f"the network under test alone (train artifact `{arts.get('train_clean')}`; no "
+            "network is trained for the sensor: `robustness.noisy_network=false`)"
+        )
+        + ". Tables 1 and 2 are measured on the test split of the "
+        f"noisy generation artifact `{arts.get('generate_noisy')}`"
+        + (f" ({', '.join(str(n) for n in images)} images)" if images else "")
+        + ", the same heaps as the clean one; the labels come from the ideal depth, so they "
+        "are the same for every input. Inputs: "
+        + "; ".join(_input_meaning(n) for n in inputs)
+        + ". "
+        + _closed_loop_note(data["closed_loop"], cfg.get("closed_loop_trials"))
+    )
 
 
 class RobustnessSection(Section):
@@ -365,35 +484,52 @@ class RobustnessSection(Section):
         whether the study's noisy generation artifact is there to draw from."""
         info.generation = robustness_generation(ctx.root, info)
         info.filter_cfg = filter_config(ROBUSTNESS_FIGURE_FILTER)
-        return {"robustness_figure": {
-            "generate": info.generation.name if info.generation is not None else None,
-            "depth_filter": OmegaConf.to_container(info.filter_cfg, resolve=True)}}
+        return {
+            "robustness_figure": {
+                "generate": info.generation.name if info.generation is not None else None,
+                "depth_filter": OmegaConf.to_container(info.filter_cfg, resolve=True),
+            }
+        }
 
     def tables(self, info: RobustnessInfo, ctx: Context) -> list[Table]:
-        return [robustness_sensor_table(info), robustness_table1_table(info),
-                robustness_table2_table(info), robustness_closed_loop_table(info),
-                robustness_policies_table(info), robustness_failures_table(info)]
+        return [
+            robustness_sensor_table(info),
+            robustness_table1_table(info),
+            robustness_table2_table(info),
+            robustness_closed_loop_table(info),
+            robustness_policies_table(info),
+            robustness_failures_table(info),
+        ]
 
     def figures(self, info: RobustnessInfo, ctx: Context, folder: Path) -> dict[str, str]:
         gen_noisy = info.data["artifacts"].get("generate_noisy")
         sensor = info.data["sensor"].get("name", "sensor")
         drawn = None
         if info.generation is not None:
-            drawn = figure_sensor_depth(info.generation, info.filter_cfg,
-                                        ROBUSTNESS_FIGURE_FILTER, str(sensor),
-                                        folder / ROBUSTNESS_FIGURE)
+            drawn = figure_sensor_depth(
+                info.generation,
+                info.filter_cfg,
+                ROBUSTNESS_FIGURE_FILTER,
+                str(sensor),
+                folder / ROBUSTNESS_FIGURE,
+            )
         if drawn is None:
             (folder / ROBUSTNESS_FIGURE).unlink(missing_ok=True)
             return {}
-        return {ROBUSTNESS_FIGURE: (
-            f"Test image #{drawn} of generation artifact `{gen_noisy}` (the robustness "
-            f"study's noisy generation): the ideal depth, the `{sensor}` model's depth "
-            f"and that depth after `depth_filter={ROBUSTNESS_FIGURE_FILTER}` (magenta: "
-            "no data; one colour scale).")}
+        return {
+            ROBUSTNESS_FIGURE: (
+                f"Test image #{drawn} of generation artifact `{gen_noisy}` (the robustness "
+                f"study's noisy generation): the ideal depth, the `{sensor}` model's depth "
+                f"and that depth after `depth_filter={ROBUSTNESS_FIGURE_FILTER}` (magenta: "
+                "no data; one colour scale)."
+            )
+        }
 
-    def markdown(self, info: RobustnessInfo | None, tables: dict[str, Table],
-                 figures: dict[str, str]) -> list[str]:
+    def markdown(
+        self, info: RobustnessInfo | None, tables: dict[str, Table], figures: dict[str, str]
+    ) -> list[str]:
         if info is not None and ROBUSTNESS_FIGURE not in figures:
             return render_robustness(info, tables, None, missing_figure_note(info))
-        return render_robustness(info, tables,
-                                 ROBUSTNESS_FIGURE if ROBUSTNESS_FIGURE in figures else None)
+        return render_robustness(
+            info, tables, ROBUSTNESS_FIGURE if ROBUSTNESS_FIGURE in figures else None
+        )

@@ -14,16 +14,16 @@ and its budget (``report.run_time_budget_min``, docs/performance.md).
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Iterable
 
 from pipeline.artifacts import load_manifest
 from pipeline.report.tables import Table
+from pipeline.runtime.cli import REPRODUCE_STAGES
 
 RUN_TIME_FILE = "tables/run_time.csv"
 # The order of ``make reproduce``; a stage not listed here comes after them, by name.
-STAGE_ORDER = ("generate", "label", "train", "baseline", "evaluate", "unseen", "ablation",
-               "robustness")
+STAGE_ORDER = REPRODUCE_STAGES
 
 
 def _folder(roots: Iterable[Path], version: str) -> Path | None:
@@ -59,8 +59,7 @@ def run_time_rows(manifests: dict[str, dict]) -> list[dict]:
     per: dict[str, dict] = {}
     for manifest in manifests.values():
         stage = str(manifest.get("stage"))
-        row = per.setdefault(stage, {"stage": stage, "artifacts": 0, "seconds": 0.0,
-                                     "untimed": 0})
+        row = per.setdefault(stage, {"stage": stage, "artifacts": 0, "seconds": 0.0, "untimed": 0})
         row["artifacts"] += 1
         seconds = (manifest.get("timings") or {}).get("total_s")
         if isinstance(seconds, (int, float)) and not isinstance(seconds, bool):
@@ -69,9 +68,12 @@ def run_time_rows(manifests: dict[str, dict]) -> list[dict]:
             row["untimed"] += 1
     order = {s: i for i, s in enumerate(STAGE_ORDER)}
     rows = sorted(per.values(), key=lambda r: (order.get(r["stage"], len(order)), r["stage"]))
-    total = {"stage": "total", "artifacts": sum(r["artifacts"] for r in rows),
-             "seconds": sum(r["seconds"] for r in rows),
-             "untimed": sum(r["untimed"] for r in rows)}
+    total = {
+        "stage": "total",
+        "artifacts": sum(r["artifacts"] for r in rows),
+        "seconds": sum(r["seconds"] for r in rows),
+        "untimed": sum(r["untimed"] for r in rows),
+    }
     return rows + [total] if rows else []
 
 
@@ -87,8 +89,9 @@ def by_stage(roots: Iterable[Path], reported: dict[str, str]) -> dict[str, dict]
     return out
 
 
-def run_time_table(roots: Iterable[Path], reported: dict[str, str],
-                   budget_min: dict[str, float] | None = None) -> Table:
+def run_time_table(
+    roots: Iterable[Path], reported: dict[str, str], budget_min: dict[str, float] | None = None
+) -> Table:
     """The run-time table of the reported artifacts (stage -> version) and those they were made
     from, per stage of ``make reproduce``, with each stage's share of the total and its budget
     (min; none: no budget)."""
@@ -97,12 +100,25 @@ def run_time_table(roots: Iterable[Path], reported: dict[str, str],
     total = rows[-1]["seconds"] if rows else 0.0
     budgets = [budget_min.get(r["stage"]) for r in rows[:-1]]
     if rows:
-        budgets.append(sum(b for b in budgets if b is not None) if any(
-            b is not None for b in budgets) else None)
-    return Table("run_time", ["stage", "artifacts", "wall-clock (min)", "share (%)",
-                              "budget (min)", "without a time"],
-                 [[r["stage"], r["artifacts"], r["seconds"] / 60.0,
-                   100.0 * r["seconds"] / total if total > 0 else None, b, r["untimed"]]
-                  for r, b in zip(rows, budgets)],
-                 ["", "{}", "{:.1f}", "{:.0f}", "{:g}", "{}"],
-                 csv_formats=["", "{}", "{:.2f}", "{:.1f}", "{}", "{}"])
+        budgets.append(
+            sum(b for b in budgets if b is not None)
+            if any(b is not None for b in budgets)
+            else None
+        )
+    return Table(
+        "run_time",
+        ["stage", "artifacts", "wall-clock (min)", "share (%)", "budget (min)", "without a time"],
+        [
+            [
+                r["stage"],
+                r["artifacts"],
+                r["seconds"] / 60.0,
+                100.0 * r["seconds"] / total if total > 0 else None,
+                b,
+                r["untimed"],
+            ]
+            for r, b in zip(rows, budgets)
+        ],
+        ["", "{}", "{:.1f}", "{:.0f}", "{:g}", "{}"],
+        csv_formats=["", "{}", "{:.2f}", "{:.1f}", "{}", "{}"],
+    )

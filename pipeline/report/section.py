@@ -27,9 +27,9 @@ from typing import Any
 
 from omegaconf import DictConfig
 
-from pipeline.cli import data_root
 from pipeline.report.tables import Table
 from pipeline.report.upstream import ArtifactInfo
+from pipeline.runtime.cli import data_root
 
 
 @dataclass
@@ -84,8 +84,9 @@ class Section:
     def figures(self, info: ArtifactInfo, ctx: Context, folder: Path) -> dict[str, str]:
         return {}
 
-    def markdown(self, info: ArtifactInfo | None, tables: dict[str, Table],
-                 figures: dict[str, str]) -> list[str]:
+    def markdown(
+        self, info: ArtifactInfo | None, tables: dict[str, Table], figures: dict[str, str]
+    ) -> list[str]:
         raise NotImplementedError
 
     def metrics(self, info: ArtifactInfo | None) -> dict[str, Any]:

@@ -14,7 +14,6 @@ from omegaconf import DictConfig
 
 from pipeline.artifacts import compute_version, run_stage, stage_config
 from pipeline.artifacts.store import StageRun
-from pipeline.cli import CONF_DIR, stage_main
 from pipeline.report.ablation import AblationSection
 from pipeline.report.baseline import BaselineSection
 from pipeline.report.closed_loop import ClosedLoopSection
@@ -28,15 +27,23 @@ from pipeline.report.section import Context, Section
 from pipeline.report.tables import Table
 from pipeline.report.training import TrainingSection
 from pipeline.report.unseen import UnseenSection
+from pipeline.runtime.cli import CONF_DIR, stage_main
 from pipeline.tracking import StageLog
 
 STAGE = "report"
 SECTIONS = ("report",)  # the config sections of the version key (``stage_config``)
 # The upstream versions cover which artifacts are read.
-NOT_AFFECTING_RESULT = ("report.force", "report.generate_version", "report.label_version",
-                        "report.train_version", "report.baseline_version",
-                        "report.evaluate_version", "report.robustness_version",
-                        "report.ablation_version", "report.unseen_version")
+NOT_AFFECTING_RESULT = (
+    "report.force",
+    "report.generate_version",
+    "report.label_version",
+    "report.train_version",
+    "report.baseline_version",
+    "report.evaluate_version",
+    "report.robustness_version",
+    "report.ablation_version",
+    "report.unseen_version",
+)
 # Files whose content is measured wall-clock time: the same artifacts give other numbers on
 # another run, so `make repro-check` skips them (they are listed in metrics.volatile_files).
 VOLATILE_FILES = ("tables/planning_time.csv", "tables/table3_timing.csv", RUN_TIME_FILE)
@@ -51,14 +58,38 @@ ABLATION = AblationSection()
 UNSEEN = UnseenSection()
 # The sections in the order they are resolved (each after the artifacts it must match), which
 # is also the order of the README's "Artifacts used" table.
-REPORT_SECTIONS: tuple[Section, ...] = (DATASET, LABELS, TRAINING, BASELINE, CLOSED_LOOP,
-                                        ROBUSTNESS, ABLATION, UNSEEN)
+REPORT_SECTIONS: tuple[Section, ...] = (
+    DATASET,
+    LABELS,
+    TRAINING,
+    BASELINE,
+    CLOSED_LOOP,
+    ROBUSTNESS,
+    ABLATION,
+    UNSEEN,
+)
 # The order their tables and figures are made in: that of the logs and the README's figures.
-BUILD_ORDER: tuple[Section, ...] = (DATASET, LABELS, TRAINING, BASELINE, CLOSED_LOOP, ABLATION,
-                                    UNSEEN, ROBUSTNESS)
+BUILD_ORDER: tuple[Section, ...] = (
+    DATASET,
+    LABELS,
+    TRAINING,
+    BASELINE,
+    CLOSED_LOOP,
+    ABLATION,
+    UNSEEN,
+    ROBUSTNESS,
+)
 # The order of their Markdown in the README.
-README_ORDER: tuple[Section, ...] = (DATASET, LABELS, TRAINING, BASELINE, UNSEEN, CLOSED_LOOP,
-                                     ABLATION, ROBUSTNESS)
+README_ORDER: tuple[Section, ...] = (
+    DATASET,
+    LABELS,
+    TRAINING,
+    BASELINE,
+    UNSEEN,
+    CLOSED_LOOP,
+    ABLATION,
+    ROBUSTNESS,
+)
 
 
 def report(cfg: DictConfig) -> Path:
@@ -85,8 +116,9 @@ def report(cfg: DictConfig) -> Path:
         tables: dict[str, Table] = {}
         for section, info in built:
             tables.update((t.name, t) for t in section.tables(info, ctx))
-        run_time = run_time_table((ctx.root, ctx.models), upstream,
-                                  dict(cfg.report.run_time_budget_min))
+        run_time = run_time_table(
+            (ctx.root, ctx.models), upstream, dict(cfg.report.run_time_budget_min)
+        )
         tables[run_time.name] = run_time
         for t in tables.values():
             path = run.work_dir / "tables" / f"{t.name}.csv"
@@ -97,8 +129,13 @@ def report(cfg: DictConfig) -> Path:
         for section, info in built:
             figures.update(section.figures(info, ctx, run.work_dir))
 
-        readme = render_readme(run.version, [(s, ctx.found[s.name]) for s in REPORT_SECTIONS],
-                               [(s, ctx.found[s.name]) for s in README_ORDER], tables, figures)
+        readme = render_readme(
+            run.version,
+            [(s, ctx.found[s.name]) for s in REPORT_SECTIONS],
+            [(s, ctx.found[s.name]) for s in README_ORDER],
+            tables,
+            figures,
+        )
         (run.work_dir / "README.md").write_text(readme)
 
         with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version) as log:
@@ -117,14 +154,15 @@ def report(cfg: DictConfig) -> Path:
 
         for section in REPORT_SECTIONS:
             run.metrics.update(section.metrics(ctx.found[section.name]))
-        run.metrics.update({
-            "volatile_files": sorted(f for f in VOLATILE_FILES if (run.work_dir / f).is_file()),
-            "tables": sorted(f"tables/{name}.csv" for name in tables),
-            "figures": sorted(figures),
-        })
+        run.metrics.update(
+            {
+                "volatile_files": sorted(f for f in VOLATILE_FILES if (run.work_dir / f).is_file()),
+                "tables": sorted(f"tables/{name}.csv" for name in tables),
+                "figures": sorted(figures),
+            }
+        )
 
-    out = run_stage(ctx.root, STAGE, version, config, upstream, body,
-                    force=bool(cfg.report.force))
+    out = run_stage(ctx.root, STAGE, version, config, upstream, body, force=bool(cfg.report.force))
     published = publish(out, Path(cfg.paths.reports))
     print(f"[{STAGE}] published {len(published)} files to {cfg.paths.reports}")
     return out

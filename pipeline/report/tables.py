@@ -13,8 +13,9 @@ from __future__ import annotations
 import csv
 import io
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -53,12 +54,17 @@ class Table:
         return buf.getvalue()
 
     def markdown(self) -> str:
-        align = ["---" if i < self.text_columns or i in self.left_columns else "---:"
-                 for i in range(len(self.headers))]
+        align = [
+            "---" if i < self.text_columns or i in self.left_columns else "---:"
+            for i in range(len(self.headers))
+        ]
         lines = ["| " + " | ".join(self.headers) + " |", "|" + "|".join(align) + "|"]
         for row in self.rows:
-            lines.append("| " + " | ".join(self._cell(v, i, NONE, self.formats)
-                                           for i, v in enumerate(row)) + " |")
+            lines.append(
+                "| "
+                + " | ".join(self._cell(v, i, NONE, self.formats) for i, v in enumerate(row))
+                + " |"
+            )
         return "\n".join(lines) + "\n"
 
 
@@ -107,7 +113,7 @@ def fraction(n: Any, total: Any) -> float | None:
 
 
 def ratio(n: Any, total: Any) -> str | None:
-    """"n/total" (integers), None when either is missing."""
+    """ "n/total" (integers), None when either is missing."""
     a, b = integer(n), integer(total)
     return None if a is None or b is None else f"{a}/{b}"
 
@@ -142,16 +148,20 @@ class Column:
         return ((self.header, self.cell, self.fmt if self.csv_fmt is None else self.csv_fmt),)
 
 
-def table_of(name: str, columns: list[Column], rows: list[dict], text_columns: int = 1
-             ) -> Table:
+def table_of(name: str, columns: list[Column], rows: list[dict], text_columns: int = 1) -> Table:
     """The table of ``rows``, one Markdown column and one or more CSV columns per column."""
     plain = [c for col in columns for c in col.csv_columns()]
-    return Table(name, [c.header for c in columns], [[c.cell(r) for c in columns] for r in rows],
-                 [c.fmt for c in columns], csv_formats=[f for _, _, f in plain],
-                 text_columns=text_columns,
-                 left_columns=tuple(i for i, c in enumerate(columns) if c.text),
-                 csv_headers=[h for h, _, _ in plain],
-                 csv_rows=[[get(r) for _, get, _ in plain] for r in rows])
+    return Table(
+        name,
+        [c.header for c in columns],
+        [[c.cell(r) for c in columns] for r in rows],
+        [c.fmt for c in columns],
+        csv_formats=[f for _, _, f in plain],
+        text_columns=text_columns,
+        left_columns=tuple(i for i, c in enumerate(columns) if c.text),
+        csv_headers=[h for h, _, _ in plain],
+        csv_rows=[[get(r) for _, get, _ in plain] for r in rows],
+    )
 
 
 def text_column(header: str, key: str) -> Column:
@@ -173,17 +183,27 @@ def rate_column(name: str, key: str, rate: Callable[[dict], Any] | None = None) 
     CSV three columns in percent."""
     get = rate or (lambda r: r.get(f"{key}_rate"))
     low, high = (lambda r: r.get(f"{key}_ci_low")), (lambda r: r.get(f"{key}_ci_high"))
-    return Column(f"{name} (95 % CI)", lambda r: rate_ci(get(r), low(r), high(r)),
-                  csv=((f"{name} (%)", lambda r: times(get(r)), PERCENT_CSV),
-                       (f"{name}, 95 % CI low (%)", lambda r: times(low(r)), PERCENT_CSV),
-                       (f"{name}, 95 % CI high (%)", lambda r: times(high(r)), PERCENT_CSV)))
+    return Column(
+        f"{name} (95 % CI)",
+        lambda r: rate_ci(get(r), low(r), high(r)),
+        csv=(
+            (f"{name} (%)", lambda r: times(get(r)), PERCENT_CSV),
+            (f"{name}, 95 % CI low (%)", lambda r: times(low(r)), PERCENT_CSV),
+            (f"{name}, 95 % CI high (%)", lambda r: times(high(r)), PERCENT_CSV),
+        ),
+    )
 
 
 def ratio_column(header: str, key: str, total: str, csv_header: str) -> Column:
     """Markdown "n/total" of the row's ``key`` and ``total``; CSV two integer columns."""
-    return Column(header, lambda r: ratio(r.get(key), r.get(total)),
-                  csv=((csv_header, lambda r: integer(r.get(key)), ""),
-                       (total, lambda r: integer(r.get(total)), "")))
+    return Column(
+        header,
+        lambda r: ratio(r.get(key), r.get(total)),
+        csv=(
+            (csv_header, lambda r: integer(r.get(key)), ""),
+            (total, lambda r: integer(r.get(total)), ""),
+        ),
+    )
 
 
 def picked_rate(row: dict) -> float | None:
@@ -195,10 +215,12 @@ def picked_rate(row: dict) -> float | None:
 def book_columns() -> list[Column]:
     """Success rate (successful attempts / attempts) and boxes picked (picked / boxes in the
     bins), each with its Wilson 95 % interval, and their counts."""
-    return [rate_column("success rate", "success"),
-            ratio_column("successes / attempts", "successes", "attempts", "successes"),
-            ratio_column("boxes picked", "picked", "boxes", "boxes picked"),
-            rate_column("boxes picked", "picked", picked_rate)]
+    return [
+        rate_column("success rate", "success"),
+        ratio_column("successes / attempts", "successes", "attempts", "successes"),
+        ratio_column("boxes picked", "picked", "boxes", "boxes picked"),
+        rate_column("boxes picked", "picked", picked_rate),
+    ]
 
 
 def _pph(value: Any) -> Any:
@@ -208,6 +230,7 @@ def _pph(value: Any) -> Any:
 
 def pph_column(header: str = "PPH (motion only)") -> Column:
     """``pph_motion``: successful picks per hour of simulated robot motion (one decimal)."""
+
     def cell(r: dict) -> Any:
         v = _pph(r.get("pph_motion"))
         return f"{v:.1f}" if isinstance(v, float) else v
@@ -215,16 +238,21 @@ def pph_column(header: str = "PPH (motion only)") -> Column:
     return Column(header, cell, csv=((header, lambda r: _pph(r.get("pph_motion")), ""),))
 
 
-TRIAL_END_NAMES = {"bin_empty": "bin empty", "no_grasp": "no grasp",
-                   "max_failures": "failure limit", "max_attempts": "attempt limit"}
+TRIAL_END_NAMES = {
+    "bin_empty": "bin empty",
+    "no_grasp": "no grasp",
+    "max_failures": "failure limit",
+    "max_attempts": "attempt limit",
+}
 
 
 def end_columns() -> list[Column]:
     """How many trials ended each way (``end_<reason>``; ``pipeline.world.trial.TRIAL_ENDS``)."""
     from pipeline.world.trial import TRIAL_ENDS
 
-    return [count_column(f"trials ended: {TRIAL_END_NAMES.get(e, e)}", f"end_{e}")
-            for e in TRIAL_ENDS]
+    return [
+        count_column(f"trials ended: {TRIAL_END_NAMES.get(e, e)}", f"end_{e}") for e in TRIAL_ENDS
+    ]
 
 
 def failure_columns() -> list[Column]:
@@ -243,8 +271,13 @@ def reason_column() -> Column:
 def drops_table(name: str, rows: list[dict]) -> Table:
     """How often each pattern dropped a box, by box mass (``drops_by_mass`` rows of an
     evaluation: planner, box, mass, pattern, held, dropped, drop rate with its 95 % interval)."""
-    columns = [text_column("planner", "planner"), text_column("box", "box"),
-               Column("mass (kg)", lambda r: number(r.get("mass_kg")), "{:.3f}"),
-               text_column("pattern", "pattern"), count_column("held at first", "held"),
-               count_column("dropped", "dropped"), rate_column("drop rate", "drop")]
+    columns = [
+        text_column("planner", "planner"),
+        text_column("box", "box"),
+        Column("mass (kg)", lambda r: number(r.get("mass_kg")), "{:.3f}"),
+        text_column("pattern", "pattern"),
+        count_column("held at first", "held"),
+        count_column("dropped", "dropped"),
+        rate_column("drop rate", "drop"),
+    ]
     return table_of(name, columns, rows, text_columns=2)

@@ -4,7 +4,8 @@ validation curve that calibrated the threshold th (Eq. 3), from the train artifa
 the label artifact the report reads.
 
 Tables ``table1_precision`` (precision top 1 / top 1 % / 5 % / 10 %, the paper's and ours),
-``threshold_calibration`` and ``training_curve`` (the losses per epoch); figure ``pr_curve.png`` (the DCNN's precision–recall curve on the
+``threshold_calibration`` and ``training_curve`` (the losses per epoch); figure ``pr_curve.png``
+(the DCNN's precision–recall curve on the
 test split). Training timings are not copied.
 """
 
@@ -23,8 +24,12 @@ TABLE1_SECTION = "Table 1 — precision of the DCNN's predictions (paper Sec. 7)
 TRAIN_NOT_RUN = "Training: not run yet (`make train`)."
 PR_FIGURE = "figures/pr_curve.png"
 # (manifest key, column header) of Table 1; the paper's values are pipeline.planner.evaluate's.
-TABLE1_COLUMNS = (("top1", "Top 1"), ("top1pct", "Top 1 %"), ("top5pct", "Top 5 %"),
-                  ("top10pct", "Top 10 %"))
+TABLE1_COLUMNS = (
+    ("top1", "Top 1"),
+    ("top1pct", "Top 1 %"),
+    ("top5pct", "Top 5 %"),
+    ("top10pct", "Top 10 %"),
+)
 
 
 class TrainInfo(ArtifactInfo):
@@ -36,16 +41,19 @@ class TrainInfo(ArtifactInfo):
         """Raises ``ArtifactError`` when the manifest lacks Table 1."""
         try:
             metrics = manifest["metrics"]
-            complete = (all(key in metrics["table1"] for key, _ in TABLE1_COLUMNS)
-                        and {"precision", "recall"} <= set(metrics["pr_curve"])
-                        and {"width", "parameters", "macs_per_image"} <= set(metrics["network"]))
+            complete = (
+                all(key in metrics["table1"] for key, _ in TABLE1_COLUMNS)
+                and {"precision", "recall"} <= set(metrics["pr_curve"])
+                and {"width", "parameters", "macs_per_image"} <= set(metrics["network"])
+            )
         except (KeyError, TypeError):
             complete = False
         if not complete:
             raise ArtifactError(
                 f"{folder.name}/manifest.json (train) lacks metrics.table1 / pr_curve / network: "
                 "the train artifact predates the report's Table 1; recompute it with `make train` "
-                "(train.force=true).")
+                "(train.force=true)."
+            )
         return cls(folder, manifest)
 
 
@@ -56,12 +64,24 @@ def resolve_train(models: Path, version: str, label_version: str | None) -> Trai
     on another label artifact than ``label_version``, or when its manifest lacks Table 1.
     """
     used = label_version if label_version is not None else "none (no label artifact)"
-    return resolve_upstream(models, "train", version, TrainInfo.load, [Match(
-        "label", label_version, lambda name, theirs: (
-            f"train artifact {name} was trained on label artifact {theirs}, but the "
-            f"report reads label artifact {used}: pass matching versions "
-            f"(report.label_version={theirs} report.train_version={name}), or rerun "
-            f"`make train` (train.label_version={label_version}) and then the report."))])
+    return resolve_upstream(
+        models,
+        "train",
+        version,
+        TrainInfo.load,
+        [
+            Match(
+                "label",
+                label_version,
+                lambda name, theirs: (
+                    f"train artifact {name} was trained on label artifact {theirs}, but the "
+                    f"report reads label artifact {used}: pass matching versions "
+                    f"(report.label_version={theirs} report.train_version={name}), or rerun "
+                    f"`make train` (train.label_version={label_version}) and then the report."
+                ),
+            )
+        ],
+    )
 
 
 def table1_table(trained: TrainInfo) -> Table:
@@ -75,18 +95,33 @@ def table1_table(trained: TrainInfo) -> Table:
     th = ours.get("threshold")
     at = f"th = {float(th):g}" if th is not None else "no threshold"
     headers = ["", *(h for _, h in TABLE1_COLUMNS)]
-    rows = [["paper", *(100.0 * PAPER_TABLE1[k] for k, _ in TABLE1_COLUMNS)],
-            [f"this reproduction, pooled top k % ({at})",
-             *(pct(ours[k]) for k, _ in TABLE1_COLUMNS)]]
+    rows = [
+        ["paper", *(100.0 * PAPER_TABLE1[k] for k, _ in TABLE1_COLUMNS)],
+        [f"this reproduction, pooled top k % ({at})", *(pct(ours[k]) for k, _ in TABLE1_COLUMNS)],
+    ]
     if "per_image" in ours:
-        rows.append([f"this reproduction, per-image top k % ({at})", pct(ours["top1"]),
-                     *(pct(ours["per_image"].get(k)) for k, _ in TABLE1_COLUMNS[1:])])
+        rows.append(
+            [
+                f"this reproduction, per-image top k % ({at})",
+                pct(ours["top1"]),
+                *(pct(ours["per_image"].get(k)) for k, _ in TABLE1_COLUMNS[1:]),
+            ]
+        )
     if "legacy" in ours:
-        rows.append(["old definition (no threshold; top 1 over images with a prediction)",
-                     *(pct(ours["legacy"].get(k)) for k, _ in TABLE1_COLUMNS)])
+        rows.append(
+            [
+                "old definition (no threshold; top 1 over images with a prediction)",
+                *(pct(ours["legacy"].get(k)) for k, _ in TABLE1_COLUMNS),
+            ]
+        )
     n = len(TABLE1_COLUMNS)
-    return Table("table1_precision", headers, rows, [""] + ["{:.2f} %"] * n,
-                 csv_formats=[""] + ["{:.4f}"] * n)
+    return Table(
+        "table1_precision",
+        headers,
+        rows,
+        [""] + ["{:.2f} %"] * n,
+        csv_formats=[""] + ["{:.4f}"] * n,
+    )
 
 
 def threshold_table(trained: TrainInfo) -> Table | None:
@@ -94,12 +129,23 @@ def threshold_table(trained: TrainInfo) -> Table | None:
     info = trained.metrics.get("threshold")
     if not info or not info.get("curve"):
         return None
-    rows = [[r["threshold"], *(None if r[k] is None else 100.0 * r[k]
-                               for k in ("gopt_accuracy", "no_candidate", "precision", "recall",
-                                         "f1"))] for r in info["curve"]]
-    return Table("threshold_calibration",
-                 ["th", "G_opt correct", "no candidate", "precision", "recall", "F1"], rows,
-                 ["{:g}"] + ["{:.2f} %"] * 5, csv_formats=["{:g}"] + ["{:.4f}"] * 5)
+    rows = [
+        [
+            r["threshold"],
+            *(
+                None if r[k] is None else 100.0 * r[k]
+                for k in ("gopt_accuracy", "no_candidate", "precision", "recall", "f1")
+            ),
+        ]
+        for r in info["curve"]
+    ]
+    return Table(
+        "threshold_calibration",
+        ["th", "G_opt correct", "no candidate", "precision", "recall", "F1"],
+        rows,
+        ["{:g}"] + ["{:.2f} %"] * 5,
+        csv_formats=["{:g}"] + ["{:.4f}"] * 5,
+    )
 
 
 def training_curve_table(trained: TrainInfo) -> Table | None:
@@ -110,14 +156,21 @@ def training_curve_table(trained: TrainInfo) -> Table | None:
     if not train or val is None:
         return None
     best = m.get("best_epoch")
-    rows = [[e, tl, vl, "model" if e == best else ""]
-            for e, (tl, vl) in enumerate(zip(train, val), 1)]
-    return Table("training_curve", ["epoch", "train loss", "val loss", ""], rows,
-                 ["{}", "{:.4f}", "{:.4f}", ""], csv_formats=["{}", "{:.6f}", "{:.6f}", ""])
+    rows = [
+        [e, tl, vl, "model" if e == best else ""] for e, (tl, vl) in enumerate(zip(train, val), 1)
+    ]
+    return Table(
+        "training_curve",
+        ["epoch", "train loss", "val loss", ""],
+        rows,
+        ["{}", "{:.4f}", "{:.4f}", ""],
+        csv_formats=["{}", "{:.6f}", "{:.6f}", ""],
+    )
 
 
-def render_train(trained: TrainInfo | None, tables: dict[str, Table],
-                 figure: str | None) -> list[str]:
+def render_train(
+    trained: TrainInfo | None, tables: dict[str, Table], figure: str | None
+) -> list[str]:
     """README lines of the Table 1 section (``figure``: the PR-curve figure, if drawn)."""
     out = [f"## {TABLE1_SECTION}", ""]
     if trained is None:
@@ -156,8 +209,11 @@ def render_train(trained: TrainInfo | None, tables: dict[str, Table],
     ]
     thr = trained.metrics.get("threshold")
     if thr and "threshold_calibration" in tables:
-        how = ("calibrated on the validation split" if thr.get("rule") == "calibrated"
-               else "fixed by `train.threshold`")
+        how = (
+            "calibrated on the validation split"
+            if thr.get("rule") == "calibrated"
+            else "fixed by `train.threshold`"
+        )
         out += [
             f"**Threshold th = {float(thr['value']):g}** ({how}; `pipeline/planner/"
             "calibration.py`): the grid value with the largest F1 of the planner's detections "
@@ -177,20 +233,31 @@ def render_train(trained: TrainInfo | None, tables: dict[str, Table],
         f"{images.get('train')} training images"
         + (f" (each mirrored at random: `train.augment_flip={flip}`)" if flip != "none" else "")
         + f" for {epochs} epoch"
-        f"{'' if epochs == 1 else 's'}" + (
+        f"{'' if epochs == 1 else 's'}"
+        + (
             f" of at most {m['max_epochs']} (validation-based stopping, patience "
             f"{(cfg.get('train') or {}).get('patience')}); the model is epoch {m['best_epoch']}, "
-            "the one with the lowest validation loss." if "best_epoch" in m else "."),
+            "the one with the lowest validation loss."
+            if "best_epoch" in m
+            else "."
+        ),
         "",
     ]
     if "training_curve" in tables:
-        out += ["Loss per epoch (focal loss per image; the model is the epoch marked):", "",
-                tables["training_curve"].markdown()]
+        out += [
+            "Loss per epoch (focal loss per image; the model is the epoch marked):",
+            "",
+            tables["training_curve"].markdown(),
+        ]
     out += [
         "CSV versions: [tables/table1_precision.csv](tables/table1_precision.csv), "
         "[tables/threshold_calibration.csv](tables/threshold_calibration.csv)"
-        + (", [tables/training_curve.csv](tables/training_curve.csv)"
-           if "training_curve" in tables else "") + "."
+        + (
+            ", [tables/training_curve.csv](tables/training_curve.csv)"
+            if "training_curve" in tables
+            else ""
+        )
+        + "."
         + (f" Precision–recall curve: [{figure}]({figure})." if figure else ""),
         "",
     ]
@@ -201,23 +268,31 @@ class TrainingSection(Section):
     name = "train"
     paper_table = (
         "Table 1 of the paper (precision of the DCNN model's predictions) is reported above, "
-        f"in \"{TABLE1_SECTION}\". ",
+        f'in "{TABLE1_SECTION}". ',
         "Table 1 of the paper (precision of the DCNN model's predictions) will appear above "
-        "once the training stage has run (`make train`). ")
+        "once the training stage has run (`make train`). ",
+    )
 
     def resolve(self, ctx: Context) -> TrainInfo | None:
         return resolve_train(ctx.models, ctx.requested("train"), ctx.version("label"))
 
     def tables(self, info: TrainInfo, ctx: Context) -> list[Table]:
-        return [t for t in (table1_table(info), threshold_table(info), training_curve_table(info))
-                if t is not None]
+        return [
+            t
+            for t in (table1_table(info), threshold_table(info), training_curve_table(info))
+            if t is not None
+        ]
 
     def figures(self, info: TrainInfo, ctx: Context, folder: Path) -> dict[str, str]:
         figure_pr_curve(info.metrics["pr_curve"], folder / PR_FIGURE)
-        return {PR_FIGURE: (
-            "Precision–recall curve of the DCNN on the test split: all predictions pooled "
-            "and ranked by confidence (from the train manifest; Table 1's definition).")}
+        return {
+            PR_FIGURE: (
+                "Precision–recall curve of the DCNN on the test split: all predictions pooled "
+                "and ranked by confidence (from the train manifest; Table 1's definition)."
+            )
+        }
 
-    def markdown(self, info: TrainInfo | None, tables: dict[str, Table],
-                 figures: dict[str, str]) -> list[str]:
+    def markdown(
+        self, info: TrainInfo | None, tables: dict[str, Table], figures: dict[str, str]
+    ) -> list[str]:
         return render_train(info, tables, PR_FIGURE if PR_FIGURE in figures else None)

@@ -1,5 +1,6 @@
 """Unseen-sizes section: Tables 1 and 2 on box sizes not seen in training, from the unseen-size
-artifact (``data/unseen/<version>``, ``report.unseen_version``; optional; ``pipeline.unseen``).
+artifact (``data/unseen/<version>``, ``report.unseen_version``; optional;
+``pipeline.stages.unseen``).
 
 Tables ``unseen_table1`` (precision of the trained network, percent) and ``unseen_table2``
 (every planner's share of optimal grasp points within the radius, pixels), each on the seen- and
@@ -15,12 +16,25 @@ from pathlib import Path
 from pipeline.artifacts import ArtifactError
 from pipeline.report.section import Context, Section
 from pipeline.report.tables import (
-    Table, book_columns, drops_table, end_columns, failure_columns, integer, number, pph_column,
-    reason_column, table_of, text_column, times, within_key,
+    Table,
+    book_columns,
+    drops_table,
+    end_columns,
+    failure_columns,
+    integer,
+    number,
+    pph_column,
+    reason_column,
+    table_of,
+    text_column,
+    times,
+    within_key,
 )
 from pipeline.report.upstream import ArtifactInfo, resolve_upstream
 
-UNSEEN_SECTION = "Unseen box sizes: Tables 1 and 2 and the closed loop on boxes not seen in training"
+UNSEEN_SECTION = (
+    "Unseen box sizes: Tables 1 and 2 and the closed loop on boxes not seen in training"
+)
 UNSEEN_NOT_RUN = "Unseen box sizes: not run yet (`make unseen`)."
 METRIC_LISTS = ("table1", "table2", "boxes")
 
@@ -34,9 +48,11 @@ class UnseenInfo(ArtifactInfo):
         """Raises ``ArtifactError`` when the manifest lacks the tables or the boxes."""
         metrics = manifest.get("metrics") or {}
         if not all(isinstance(metrics.get(k), list) for k in METRIC_LISTS):
-            raise ArtifactError(f"{folder.name}/manifest.json (unseen) lacks metrics.table1 / "
-                                "table2 / boxes; recompute it with `make unseen` "
-                                "(unseen.force=true).")
+            raise ArtifactError(
+                f"{folder.name}/manifest.json (unseen) lacks metrics.table1 / "
+                "table2 / boxes; recompute it with `make unseen` "
+                "(unseen.force=true)."
+            )
         return cls(folder, manifest)
 
 
@@ -48,28 +64,72 @@ def resolve_unseen(root: Path, version: str) -> UnseenInfo | None:
 
 def unseen_table1(metrics: dict) -> Table:
     """Table 1 of the trained network on the seen- and the unseen-size test split (percent)."""
-    keys = ("top1", "top1pct", "top5pct", "top10pct", "per_image_top1pct",
-            "per_image_top5pct", "per_image_top10pct")
-    headers = ["box sizes", "th", "Top 1", "Top 1 % (pooled)", "Top 5 % (pooled)",
-               "Top 10 % (pooled)", "Top 1 % (per image)", "Top 5 % (per image)",
-               "Top 10 % (per image)", "scored images", "no prediction"]
-    rows = [[r["set"], number(r.get("threshold")), *(times(r.get(k)) for k in keys),
-             integer(r.get("scored_images")), integer(r.get("no_prediction_images"))]
-            for r in metrics["table1"]]
-    return Table("unseen_table1", headers, rows,
-                 ["", "{:g}"] + ["{:.2f} %"] * len(keys) + ["{}", "{}"], text_columns=1)
+    keys = (
+        "top1",
+        "top1pct",
+        "top5pct",
+        "top10pct",
+        "per_image_top1pct",
+        "per_image_top5pct",
+        "per_image_top10pct",
+    )
+    headers = [
+        "box sizes",
+        "th",
+        "Top 1",
+        "Top 1 % (pooled)",
+        "Top 5 % (pooled)",
+        "Top 10 % (pooled)",
+        "Top 1 % (per image)",
+        "Top 5 % (per image)",
+        "Top 10 % (per image)",
+        "scored images",
+        "no prediction",
+    ]
+    rows = [
+        [
+            r["set"],
+            number(r.get("threshold")),
+            *(times(r.get(k)) for k in keys),
+            integer(r.get("scored_images")),
+            integer(r.get("no_prediction_images")),
+        ]
+        for r in metrics["table1"]
+    ]
+    return Table(
+        "unseen_table1",
+        headers,
+        rows,
+        ["", "{:g}"] + ["{:.2f} %"] * len(keys) + ["{}", "{}"],
+        text_columns=1,
+    )
 
 
 def unseen_table2(metrics: dict) -> Table:
     """Table 2 of every planner on the seen- and the unseen-size test split (percent)."""
     key, radius = within_key(metrics["table2"])
-    headers = ["box sizes", "planner", f"less than {radius} px", "images", "no grasp",
-               "median distance (px)"]
-    rows = [[r["set"], r.get("name", r["planner"]), times(r.get(key)), integer(r.get("images")),
-             integer(r.get("no_grasp")), number(r.get("median_distance_px"))]
-            for r in metrics["table2"]]
-    return Table("unseen_table2", headers, rows,
-                 ["", "", "{:.2f} %", "{}", "{}", "{:.1f}"], text_columns=2)
+    headers = [
+        "box sizes",
+        "planner",
+        f"less than {radius} px",
+        "images",
+        "no grasp",
+        "median distance (px)",
+    ]
+    rows = [
+        [
+            r["set"],
+            r.get("name", r["planner"]),
+            times(r.get(key)),
+            integer(r.get("images")),
+            integer(r.get("no_grasp")),
+            number(r.get("median_distance_px")),
+        ]
+        for r in metrics["table2"]
+    ]
+    return Table(
+        "unseen_table2", headers, rows, ["", "", "{:.2f} %", "{}", "{}", "{:.1f}"], text_columns=2
+    )
 
 
 def unseen_closed_loop(metrics: dict) -> Table:
@@ -77,10 +137,18 @@ def unseen_closed_loop(metrics: dict) -> Table:
     picked with their 95 % intervals), PPH, failures by kind, trial ends, why no attempt."""
     from pipeline.report.closed_loop import PLANNER_LABELS
 
-    rows = [{**r, "label": PLANNER_LABELS.get(r["planner"], r["planner"])}
-            for r in metrics.get("closed_loop") or []]
-    columns = [text_column("planner", "label"), *book_columns(), pph_column(),
-               *failure_columns(), *end_columns(), reason_column()]
+    rows = [
+        {**r, "label": PLANNER_LABELS.get(r["planner"], r["planner"])}
+        for r in metrics.get("closed_loop") or []
+    ]
+    columns = [
+        text_column("planner", "label"),
+        *book_columns(),
+        pph_column(),
+        *failure_columns(),
+        *end_columns(),
+        reason_column(),
+    ]
     return table_of("unseen_closed_loop", columns, rows)
 
 
@@ -89,10 +157,12 @@ def render_unseen(info: UnseenInfo | None, tables: dict[str, Table]) -> list[str
     out = [f"## {UNSEEN_SECTION}", ""]
     if info is None:
         return out + [UNSEEN_NOT_RUN, ""]
-    sizes = ", ".join(f"{b['name']} {' x '.join(f'{1000 * x:g}' for x in b['size'])} mm"
-                      for b in info.metrics["boxes"])
+    sizes = ", ".join(
+        f"{b['name']} {' x '.join(f'{1000 * x:g}' for x in b['size'])} mm"
+        for b in info.metrics["boxes"]
+    )
     out += [
-        f"Unseen-size artifact `{info.version}` (`python -m pipeline.unseen`): the trained "
+        f"Unseen-size artifact `{info.version}` (`python -m pipeline.stages.unseen`): the trained "
         "network and the Dex-Net-style planners, all trained on the three training sizes, on a "
         f"test split of heaps of other boxes ({sizes}), beside the same tables on the training "
         "sizes' test split (*seen*, from the train and baseline artifacts). Definitions as in "
@@ -105,8 +175,9 @@ def render_unseen(info: UnseenInfo | None, tables: dict[str, Table]) -> list[str
         "",
     ]
     if "unseen_closed_loop" in tables:
-        evaluation = info.metrics.get("artifacts", {}).get("evaluate_unseen") or \
-            (info.manifest.get("upstream") or {}).get("evaluate_unseen", "")
+        evaluation = info.metrics.get("artifacts", {}).get("evaluate_unseen") or (
+            info.manifest.get("upstream") or {}
+        ).get("evaluate_unseen", "")
         out += [
             f"**The closed loop on the unseen sizes** (evaluation artifact `{evaluation}`): "
             "every planner on the same heaps of 12 boxes of the unseen sizes, drawn from the "
@@ -135,10 +206,13 @@ class UnseenSection(Section):
     def tables(self, info: UnseenInfo, ctx: Context) -> list[Table]:
         out = [unseen_table1(info.metrics), unseen_table2(info.metrics)]
         if info.metrics.get("closed_loop"):
-            out += [unseen_closed_loop(info.metrics),
-                    drops_table("unseen_drops_by_mass", info.metrics.get("drops_by_mass") or [])]
+            out += [
+                unseen_closed_loop(info.metrics),
+                drops_table("unseen_drops_by_mass", info.metrics.get("drops_by_mass") or []),
+            ]
         return out
 
-    def markdown(self, info: UnseenInfo | None, tables: dict[str, Table],
-                 figures: dict[str, str]) -> list[str]:
+    def markdown(
+        self, info: UnseenInfo | None, tables: dict[str, Table], figures: dict[str, str]
+    ) -> list[str]:
         return render_unseen(info, tables)

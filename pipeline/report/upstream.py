@@ -10,9 +10,10 @@ section reports.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterable, TypeVar
+from typing import TypeVar
 
 from pipeline.artifacts import (
     ArtifactError,
@@ -70,14 +71,23 @@ class Match:
             return
         if theirs == self.expected:
             return
-        if self.stage_dir is not None and theirs is not None and self.expected is not None \
-                and same_data(self.stage_dir, theirs, self.expected):
+        if (
+            self.stage_dir is not None
+            and theirs is not None
+            and self.expected is not None
+            and same_data(self.stage_dir, theirs, self.expected)
+        ):
             return
         raise ArtifactError(self.message(version, theirs))
 
 
-def resolve_upstream(where: Path, stage: str, version: str, load: Callable[[Path, dict], Info],
-                     matches: Iterable[Match] = ()) -> Info | None:
+def resolve_upstream(
+    where: Path,
+    stage: str,
+    version: str,
+    load: Callable[[Path, dict], Info],
+    matches: Iterable[Match] = (),
+) -> Info | None:
     """The ``stage`` artifact under ``where`` (a data or models folder) that the report reads.
 
     ``version``: the config's ``report.<stage>_version``. Returns None when it is "latest" and no

@@ -11,14 +11,7 @@ both use this package, so that they agree on what the robot can reach.
 * :mod:`pipeline.robot.model`: :class:`Robot` (FK, IK, collision checks, home pose) and
   :class:`RobotConfig`.
 * :mod:`pipeline.robot.target_pose`: the camera's target pose for a surface and grasp pattern.
+
+The package imports nothing itself (pybullet loads with ``model``), so a module that needs only
+the geometry (``urdf_builder``, ``target_pose``) does not pull in the simulator.
 """
-
-from pipeline.robot.model import Contact, IKResult, Robot, RobotConfig, rotation_angle_deg
-from pipeline.robot.target_pose import target_camera_pose
-from pipeline.robot.urdf_builder import (CUP_DIAMETER, CUP_OFFSET, CUP_TIP_Z, URDF_PATH,
-                                         build_urdf_xml)
-
-__all__ = [
-    "CUP_DIAMETER", "CUP_OFFSET", "CUP_TIP_Z", "Contact", "IKResult", "Robot", "RobotConfig",
-    "URDF_PATH", "build_urdf_xml", "rotation_angle_deg", "target_camera_pose",
-]

@@ -32,9 +32,15 @@ def check_approach(name: str) -> str:
     return name
 
 
-def lift_height(T_cam0_goal: np.ndarray, centre_cam: np.ndarray, up_cam: np.ndarray,
-                limit_x: float, limit_y: float, max_lift: float, step: float = 0.01
-                ) -> tuple[float, np.ndarray | None]:
+def lift_height(
+    T_cam0_goal: np.ndarray,
+    centre_cam: np.ndarray,
+    up_cam: np.ndarray,
+    limit_x: float,
+    limit_y: float,
+    max_lift: float,
+    step: float = 0.01,
+) -> tuple[float, np.ndarray | None]:
     """The "lift" approach's first goal: the grasp pose ``T_cam0_goal`` (4, 4, in cam0) raised
     by the largest of ``max_lift`` down to 0 (``step`` decrements) at which the surface centre,
     seen from the raised camera, stays within ``|x/z| <= limit_x`` and ``|y/z| <= limit_y`` (a
@@ -55,26 +61,45 @@ def lift_height(T_cam0_goal: np.ndarray, centre_cam: np.ndarray, up_cam: np.ndar
     R = T_cam0_goal[:3, :3]
     for h in np.arange(max_lift, 0.0, -step):
         point = R.T @ (centre_cam - (T_cam0_goal[:3, 3] + h * up_cam))
-        if point[2] > 0 and abs(point[0] / point[2]) <= limit_x and \
-                abs(point[1] / point[2]) <= limit_y:
+        if (
+            point[2] > 0
+            and abs(point[0] / point[2]) <= limit_x
+            and abs(point[1] / point[2]) <= limit_y
+        ):
             return float(h), point
     return 0.0, None
 
 
-def pregrasp_standoff(T_world_cam: np.ndarray, centre_cam: np.ndarray, normal_cam: np.ndarray,
-                      x_axis_cam: np.ndarray, pattern: str, standoff: float, cup_offset: float,
-                      max_standoff: float, half_x: float, half_y: float) -> float:
+def pregrasp_standoff(
+    T_world_cam: np.ndarray,
+    centre_cam: np.ndarray,
+    normal_cam: np.ndarray,
+    x_axis_cam: np.ndarray,
+    pattern: str,
+    standoff: float,
+    cup_offset: float,
+    max_standoff: float,
+    half_x: float,
+    half_y: float,
+) -> float:
     """The "pregrasp" approach's distance from the surface along its normal: the largest of
     ``max_standoff`` down to ``standoff`` (d*) in 1 cm steps at which the camera and both cup
     lips lie within ``|x| <= half_x``, ``|y| <= half_y`` in the world (the walls' vertical
     planes less a margin), so the descent along the normal cannot sweep a wall; d* when none
     does (the direct approach)."""
-    points = np.array([[0, 0, 0], [0, -cup_offset, CUP_TIP_Z], [0, cup_offset, CUP_TIP_Z]],
-                      np.float64)
+    points = np.array(
+        [[0, 0, 0], [0, -cup_offset, CUP_TIP_Z], [0, cup_offset, CUP_TIP_Z]], np.float64
+    )
     for d in np.arange(max_standoff, standoff, -0.01):
         try:
-            T = T_world_cam @ target_camera_pose(centre_cam, normal_cam, x_axis_cam, pattern,
-                                                 standoff=float(d), cup_offset=cup_offset)
+            T = T_world_cam @ target_camera_pose(
+                centre_cam,
+                normal_cam,
+                x_axis_cam,
+                pattern,
+                standoff=float(d),
+                cup_offset=cup_offset,
+            )
         except ValueError:
             return standoff
         w = points @ T[:3, :3].T + T[:3, 3]
@@ -83,8 +108,16 @@ def pregrasp_standoff(T_world_cam: np.ndarray, centre_cam: np.ndarray, normal_ca
     return standoff
 
 
-def first_goal(servo_cfg, cfg, T_world_cam: np.ndarray, centre_cam: np.ndarray,
-               normal_cam: np.ndarray, x_axis_cam: np.ndarray, pattern: str, intrinsics):
+def first_goal(
+    servo_cfg,
+    cfg,
+    T_world_cam: np.ndarray,
+    centre_cam: np.ndarray,
+    normal_cam: np.ndarray,
+    x_axis_cam: np.ndarray,
+    pattern: str,
+    intrinsics,
+):
     """(the servo configuration of the approach's first goal, its distance from the surface)
     for ``cfg.motion.approach``, given the servo's own configuration ``servo_cfg``
     (``pipeline.servo.control.servo_config``) and a surface seen from the home camera
@@ -104,23 +137,37 @@ def first_goal(servo_cfg, cfg, T_world_cam: np.ndarray, centre_cam: np.ndarray,
     approach = check_approach(str(m.approach))
     if approach == "pregrasp":
         margin = float(m.pregrasp_wall_margin)
-        d = pregrasp_standoff(T_world_cam, centre_cam, normal_cam, x_axis_cam, pattern, d_star,
-                              off, float(m.pregrasp_standoff),
-                              float(b.inner_length_x) / 2 - margin,
-                              float(b.inner_width_y) / 2 - margin)
+        d = pregrasp_standoff(
+            T_world_cam,
+            centre_cam,
+            normal_cam,
+            x_axis_cam,
+            pattern,
+            d_star,
+            off,
+            float(m.pregrasp_standoff),
+            float(b.inner_length_x) / 2 - margin,
+            float(b.inner_width_y) / 2 - margin,
+        )
         if d <= d_star:
             return servo_cfg, d_star
         return _via(dataclasses.replace(servo_cfg, standoff=d), m), d
     if approach == "lift":
-        T = target_camera_pose(centre_cam, normal_cam, x_axis_cam, pattern, standoff=d_star,
-                               cup_offset=off)
+        T = target_camera_pose(
+            centre_cam, normal_cam, x_axis_cam, pattern, standoff=d_star, cup_offset=off
+        )
         up_cam = T_world_cam[:3, :3].T @ np.array([0.0, 0.0, 1.0])
-        h, point = lift_height(T, np.asarray(centre_cam, np.float64), up_cam,
-                               *image_limits(intrinsics, float(m.pregrasp_image_fraction)),
-                               float(m.pregrasp_standoff) - d_star)
+        h, point = lift_height(
+            T,
+            np.asarray(centre_cam, np.float64),
+            up_cam,
+            *image_limits(intrinsics, float(m.pregrasp_image_fraction)),
+            float(m.pregrasp_standoff) - d_star,
+        )
         if point is not None:
-            return _via(dataclasses.replace(
-                servo_cfg, target_point=tuple(float(x) for x in point)), m), d_star + h
+            return _via(
+                dataclasses.replace(servo_cfg, target_point=tuple(float(x) for x in point)), m
+            ), d_star + h
     return servo_cfg, d_star
 
 
@@ -128,11 +175,16 @@ def _via(goal, motion_cfg):
     """``goal`` as a via point: its tolerances times ``motion.via_tolerance_scale``."""
     k = float(motion_cfg.via_tolerance_scale)
     if k < 1:
-        raise ValueError(f"motion.via_tolerance_scale must be >= 1 (a via point is no tighter "
-                         f"than the goal), got {k}")
-    return dataclasses.replace(goal, tolerance_xy=goal.tolerance_xy * k,
-                               tolerance_log_z=goal.tolerance_log_z * k,
-                               tolerance_rot_deg=goal.tolerance_rot_deg * k)
+        raise ValueError(
+            f"motion.via_tolerance_scale must be >= 1 (a via point is no tighter "
+            f"than the goal), got {k}"
+        )
+    return dataclasses.replace(
+        goal,
+        tolerance_xy=goal.tolerance_xy * k,
+        tolerance_log_z=goal.tolerance_log_z * k,
+        tolerance_rot_deg=goal.tolerance_rot_deg * k,
+    )
 
 
 def image_limits(intrinsics, fraction: float) -> tuple[float, float]:

@@ -10,8 +10,9 @@ Joint vectors ``q`` are (7,) float64 radians in the order of :attr:`Robot.joint_
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import NamedTuple, Optional, Sequence
+from typing import NamedTuple
 
 import numpy as np
 import pybullet as p
@@ -72,7 +73,7 @@ class IKResult:
     q: np.ndarray
     position_error_m: float
     orientation_error_deg: float
-    reason: Optional[str]
+    reason: str | None
     collisions: list = field(default_factory=list)
 
 
@@ -95,8 +96,9 @@ def rotation_angle_deg(R_a: np.ndarray, R_b: np.ndarray) -> float:
     """Angle of the rotation between two (3, 3) rotation matrices, degrees."""
     R = R_a.T @ R_b
     # atan2 of the sine (skew part) and cosine (trace) stays accurate near 0 and π.
-    s = 0.5 * math.sqrt((R[2, 1] - R[1, 2]) ** 2 + (R[0, 2] - R[2, 0]) ** 2
-                        + (R[1, 0] - R[0, 1]) ** 2)
+    s = 0.5 * math.sqrt(
+        (R[2, 1] - R[1, 2]) ** 2 + (R[0, 2] - R[2, 0]) ** 2 + (R[1, 0] - R[0, 1]) ** 2
+    )
     c = (np.trace(R) - 1.0) / 2.0
     return math.degrees(math.atan2(s, c))
 
@@ -104,8 +106,14 @@ def rotation_angle_deg(R_a: np.ndarray, R_b: np.ndarray) -> float:
 def _overlap(box_a, box_b, margin: float) -> bool:
     """Whether two AABBs ((min x, y, z), (max x, y, z)) come closer than ``margin``."""
     (a0, a1), (b0, b1) = box_a, box_b
-    return (a0[0] <= b1[0] + margin and b0[0] <= a1[0] + margin and a0[1] <= b1[1] + margin
-            and b0[1] <= a1[1] + margin and a0[2] <= b1[2] + margin and b0[2] <= a1[2] + margin)
+    return (
+        a0[0] <= b1[0] + margin
+        and b0[0] <= a1[0] + margin
+        and a0[1] <= b1[1] + margin
+        and b0[1] <= a1[1] + margin
+        and a0[2] <= b1[2] + margin
+        and b0[2] <= a1[2] + margin
+    )
 
 
 class Robot:
@@ -146,20 +154,33 @@ class Robot:
         cfg = self.cfg
         self.client = client
         base_q = p.getQuaternionFromEuler([0, 0, math.radians(cfg.base_yaw_deg)])
-        self.body_id = p.loadURDF(cfg.urdf_path, basePosition=list(cfg.base_position),
-                                  baseOrientation=base_q, useFixedBase=True,
-                                  flags=p.URDF_USE_IMPLICIT_CYLINDER,
-                                  physicsClientId=client)
+        self.body_id = p.loadURDF(
+            cfg.urdf_path,
+            basePosition=list(cfg.base_position),
+            baseOrientation=base_q,
+            useFixedBase=True,
+            flags=p.URDF_USE_IMPLICIT_CYLINDER,
+            physicsClientId=client,
+        )
         if ground_z is not None and cfg.base_position[2] - ground_z > 1e-4:
             half = cfg.pedestal_half_size_xy
             hz = (cfg.base_position[2] - ground_z) / 2.0
-            col = p.createCollisionShape(p.GEOM_BOX, halfExtents=[half, half, hz],
-                                         physicsClientId=client)
-            vis = p.createVisualShape(p.GEOM_BOX, halfExtents=[half, half, hz],
-                                      rgbaColor=[0.5, 0.5, 0.5, 1], physicsClientId=client)
+            col = p.createCollisionShape(
+                p.GEOM_BOX, halfExtents=[half, half, hz], physicsClientId=client
+            )
+            vis = p.createVisualShape(
+                p.GEOM_BOX,
+                halfExtents=[half, half, hz],
+                rgbaColor=[0.5, 0.5, 0.5, 1],
+                physicsClientId=client,
+            )
             self.pedestal_id = p.createMultiBody(
-                0.0, col, vis, basePosition=[cfg.base_position[0], cfg.base_position[1],
-                                             ground_z + hz], physicsClientId=client)
+                0.0,
+                col,
+                vis,
+                basePosition=[cfg.base_position[0], cfg.base_position[1], ground_z + hz],
+                physicsClientId=client,
+            )
         self._read_structure()
         return self.body_id
 
@@ -176,8 +197,10 @@ class Robot:
                 lower.append(info[8])
                 upper.append(info[9])
         self.joint_indices = movable  # pybullet joint index of each entry of q
-        self.joint_names = [p.getJointInfo(self.body_id, j, physicsClientId=self.client)[1]
-                            .decode() for j in movable]
+        self.joint_names = [
+            p.getJointInfo(self.body_id, j, physicsClientId=self.client)[1].decode()
+            for j in movable
+        ]
         self.joint_limits = np.array([lower, upper]).T  # (7, 2) radians
         self.camera_link = self.link_index["camera"]
         self.link_name = {v: k for k, v in self.link_index.items()}
@@ -189,14 +212,19 @@ class Robot:
         self._links = links  # -1 (base) and every link index
         # Pairs ≥ 3 movable joints apart on this serial chain can actually meet; closer pairs
         # share a joint housing and always touch in the primitive geometry.
-        self.self_collision_pairs = [(a, b) for i, a in enumerate(links) for b in links[i + 1:]
-                                     if abs(depth[a] - depth[b]) >= 3]
+        self.self_collision_pairs = [
+            (a, b)
+            for i, a in enumerate(links)
+            for b in links[i + 1 :]
+            if abs(depth[a] - depth[b]) >= 3
+        ]
         span = self.joint_limits[:, 1] - self.joint_limits[:, 0]
         # Joints whose range spans a full turn: an answer outside the limits is wrapped by 2π.
         self._wraps = span >= 2 * math.pi - 1e-9
         # joint7 (the hand tilt) is the last movable joint.
-        self._ik_damping = ([self.cfg.ik_joint_damping] * (len(movable) - 1)
-                            + [self.cfg.ik_hand_damping])
+        self._ik_damping = [self.cfg.ik_joint_damping] * (len(movable) - 1) + [
+            self.cfg.ik_hand_damping
+        ]
 
     def _require_loaded(self) -> None:
         if self.body_id is None:
@@ -206,14 +234,21 @@ class Robot:
     def set_joints(self, q: Sequence[float]) -> None:
         """Teleport the joints to ``q`` (7,), radians (zero velocity)."""
         self._require_loaded()
-        p.resetJointStatesMultiDof(self.body_id, self.joint_indices, [[float(v)] for v in q],
-                                   physicsClientId=self.client)
+        p.resetJointStatesMultiDof(
+            self.body_id, self.joint_indices, [[float(v)] for v in q], physicsClientId=self.client
+        )
 
     def joints(self) -> np.ndarray:
         """The current joint vector (7,), radians."""
         self._require_loaded()
-        return np.array([s[0] for s in p.getJointStates(self.body_id, self.joint_indices,
-                                                          physicsClientId=self.client)])
+        return np.array(
+            [
+                s[0]
+                for s in p.getJointStates(
+                    self.body_id, self.joint_indices, physicsClientId=self.client
+                )
+            ]
+        )
 
     def link_pose(self, name: str, q: Sequence[float] | None = None) -> np.ndarray:
         """``T_world_link`` (4, 4) of URDF link ``name`` by FK; sets the joints to ``q`` first."""
@@ -224,8 +259,9 @@ class Robot:
         if idx == -1:
             pos, orn = p.getBasePositionAndOrientation(self.body_id, physicsClientId=self.client)
         else:
-            st = p.getLinkState(self.body_id, idx, computeForwardKinematics=True,
-                                physicsClientId=self.client)
+            st = p.getLinkState(
+                self.body_id, idx, computeForwardKinematics=True, physicsClientId=self.client
+            )
             pos, orn = st[4], st[5]
         return pose_matrix(np.asarray(pos), np.asarray(orn))
 
@@ -236,8 +272,10 @@ class Robot:
     def within_limits(self, q: Sequence[float], tol: float = 1e-6) -> bool:
         """Whether every joint of ``q`` (7,) lies within its limits (± ``tol`` rad)."""
         q = np.asarray(q)
-        return bool(np.all(q >= self.joint_limits[:, 0] - tol)
-                    and np.all(q <= self.joint_limits[:, 1] + tol))
+        return bool(
+            np.all(q >= self.joint_limits[:, 0] - tol)
+            and np.all(q <= self.joint_limits[:, 1] + tol)
+        )
 
     def _wrap_into_limits(self, q: np.ndarray) -> np.ndarray:
         """Full-turn joints moved by multiples of 2π into their limits (same pose)."""
@@ -252,8 +290,10 @@ class Robot:
 
     def _pose_error(self, T_target: np.ndarray, link: int) -> tuple[float, float]:
         T = self.link_pose(self.link_name[link])
-        return (float(np.linalg.norm(T[:3, 3] - T_target[:3, 3])),
-                rotation_angle_deg(T[:3, :3], T_target[:3, :3]))
+        return (
+            float(np.linalg.norm(T[:3, 3] - T_target[:3, 3])),
+            rotation_angle_deg(T[:3, :3], T_target[:3, :3]),
+        )
 
     def _ik_from(self, seed: np.ndarray, T_target: np.ndarray, link: int | None = None):
         """Damped-least-squares IK from ``seed`` on ``link`` (default: the camera), FK-checked.
@@ -275,18 +315,24 @@ class Robot:
         best, best_key = (math.inf, math.inf, q), (2, math.inf)
         for _ in range(cfg.ik_refinements):
             self.set_joints(q)
-            q = np.array(p.calculateInverseKinematics(
-                self.body_id, link, pos, orn, jointDamping=self._ik_damping,
-                maxNumIterations=cfg.ik_max_iterations,
-                residualThreshold=cfg.ik_residual_threshold, physicsClientId=self.client))
+            q = np.array(
+                p.calculateInverseKinematics(
+                    self.body_id,
+                    link,
+                    pos,
+                    orn,
+                    jointDamping=self._ik_damping,
+                    maxNumIterations=cfg.ik_max_iterations,
+                    residualThreshold=cfg.ik_residual_threshold,
+                    physicsClientId=self.client,
+                )
+            )
             q = self._wrap_into_limits(q)
             self.set_joints(q)
             pos_err, rot_err = self._pose_error(T_target, link)
-            reached = (pos_err <= cfg.position_tolerance
-                       and rot_err <= cfg.orientation_tolerance_deg)
+            reached = pos_err <= cfg.position_tolerance and rot_err <= cfg.orientation_tolerance_deg
             in_limits = self.within_limits(q)
-            key = (0 if reached and in_limits else 1 if reached else 2,
-                   pos_err + 1e-3 * rot_err)
+            key = (0 if reached and in_limits else 1 if reached else 2, pos_err + 1e-3 * rot_err)
             if key < best_key:
                 best, best_key = (pos_err, rot_err, q), key
             if key[0] == 0:
@@ -308,15 +354,20 @@ class Robot:
         yield home
         if self._restart_offsets is None:
             rng = np.random.default_rng(0)
-            self._restart_offsets = rng.normal(0.0, self.cfg.ik_restart_noise_rad,
-                                               (self.cfg.ik_restarts, len(home)))
+            self._restart_offsets = rng.normal(
+                0.0, self.cfg.ik_restart_noise_rad, (self.cfg.ik_restarts, len(home))
+            )
         lo, hi = self.joint_limits[:, 0], self.joint_limits[:, 1]
         for offset in self._restart_offsets:
             yield np.clip(home + offset, lo, hi)
 
-    def solve_ik(self, T_world_cam_target: np.ndarray, seed_q: Sequence[float] | None = None,
-                 obstacle_ids: Sequence[int] = (), ignore_body_ids: Sequence[int] = ()
-                 ) -> IKResult:
+    def solve_ik(
+        self,
+        T_world_cam_target: np.ndarray,
+        seed_q: Sequence[float] | None = None,
+        obstacle_ids: Sequence[int] = (),
+        ignore_body_ids: Sequence[int] = (),
+    ) -> IKResult:
         """Joint angles that put the camera at ``T_world_cam_target`` (4, 4; OpenCV frame).
 
         Per seed (``seed_q``, then the home pose, then perturbations of it): pybullet IK on the
@@ -340,25 +391,35 @@ class Robot:
                 res = IKResult(False, q, pos_err, rot_err, "joint_limits")
             else:
                 hits = self.in_collision(q, obstacle_ids, ignore_body_ids)
-                res = IKResult(not hits, q, pos_err, rot_err, "collision" if hits else None,
-                               hits)
+                res = IKResult(not hits, q, pos_err, rot_err, "collision" if hits else None, hits)
             if res.ok:
                 return res
-            if best is None or _REASON_RANK[res.reason] > _REASON_RANK[best.reason] or (
+            if (
+                best is None
+                or _REASON_RANK[res.reason] > _REASON_RANK[best.reason]
+                or (
                     res.reason == best.reason == "ik"
-                    and res.position_error_m < best.position_error_m):
+                    and res.position_error_m < best.position_error_m
+                )
+            ):
                 best = res
             if res.reason == "collision" and any(
-                    c.robot_link in _CAMERA_RIGID and c.other_body != self.body_id
-                    for c in res.collisions):
+                c.robot_link in _CAMERA_RIGID and c.other_body != self.body_id
+                for c in res.collisions
+            ):
                 break  # the camera and cups sit at the target whatever q is: no seed helps
         self.set_joints(best.q)
         return best
 
     # ----------------------------------------------------------------------------- collisions
-    def in_collision(self, q: Sequence[float] | None, obstacle_body_ids: Sequence[int],
-                     ignore_body_ids: Sequence[int] = (), margin: float | None = None,
-                     self_collision: bool = True) -> list[Contact]:
+    def in_collision(
+        self,
+        q: Sequence[float] | None,
+        obstacle_body_ids: Sequence[int],
+        ignore_body_ids: Sequence[int] = (),
+        margin: float | None = None,
+        self_collision: bool = True,
+    ) -> list[Contact]:
         """Robot links within the margin of an obstacle, or of each other, at ``q``.
 
         Args:
@@ -396,8 +457,12 @@ class Robot:
             near_link = {}
             for link in self._links:
                 lo, hi = boxes[link]
-                hits = p.getOverlappingObjects([v - margin for v in lo], [v + margin for v in hi],
-                                               physicsClientId=cid) or ()
+                hits = (
+                    p.getOverlappingObjects(
+                        [v - margin for v in lo], [v + margin for v in hi], physicsClientId=cid
+                    )
+                    or ()
+                )
                 near_link[link] = {b for b, _ in hits if b in pool}
         for body in wanted:
             other = None if near_link is not None else p.getAABB(body, physicsClientId=cid)
@@ -411,9 +476,10 @@ class Robot:
                     continue
                 if p.getClosestPoints(rid, body, margin, linkIndexA=link, physicsClientId=cid):
                     found.append(Contact(self.link_name[link], body))
-        for a, b in (self.self_collision_pairs if self_collision else ()):
+        for a, b in self.self_collision_pairs if self_collision else ():
             if _overlap(boxes[a], boxes[b], self_margin) and p.getClosestPoints(
-                    rid, rid, self_margin, linkIndexA=a, linkIndexB=b, physicsClientId=cid):
+                rid, rid, self_margin, linkIndexA=a, linkIndexB=b, physicsClientId=cid
+            ):
                 found.append(Contact(self.link_name[a], rid))
         return found
 
@@ -441,13 +507,17 @@ class Robot:
             self.set_joints(q)
             pos_err, rot_err = self._pose_error(T_cam, self.camera_link)
             hits = self.in_collision(q, ())
-            if (pos_err > self.cfg.position_tolerance
-                    or rot_err > self.cfg.orientation_tolerance_deg
-                    or not self.within_limits(q) or hits):
+            if (
+                pos_err > self.cfg.position_tolerance
+                or rot_err > self.cfg.orientation_tolerance_deg
+                or not self.within_limits(q)
+                or hits
+            ):
                 raise RuntimeError(
                     f"the home camera pose is not reachable from base {self.cfg.base_position}: "
                     f"errors {pos_err:.4f} m / {rot_err:.2f} deg, joints {np.round(q, 3)}, "
-                    f"self-contacts {hits}; move RobotConfig.base_position")
+                    f"self-contacts {hits}; move RobotConfig.base_position"
+                )
             self._home_q = q.copy()
         return self._home_q.copy()
 
@@ -466,6 +536,11 @@ def robot_config(cfg) -> RobotConfig:
             f"hand config (cup_diameter={cfg.hand.cup_diameter}, cup_offset="
             f"{cfg.hand.cup_offset}) differs from the robot URDF's cups {built}: change "
             "pipeline/robot/urdf_builder.py to match and run `python -m "
-            "pipeline.robot.urdf_builder`, or keep conf/hand/two_cup.yaml as it is")
-    return from_section(RobotConfig, cfg.robot, urdf_path=str(urdf_builder.URDF_PATH),
-                        base_position=tuple(cfg.robot.base_position))
+            "pipeline.robot.urdf_builder`, or keep conf/hand/two_cup.yaml as it is"
+        )
+    return from_section(
+        RobotConfig,
+        cfg.robot,
+        urdf_path=str(urdf_builder.URDF_PATH),
+        base_position=tuple(cfg.robot.base_position),
+    )

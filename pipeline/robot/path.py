@@ -13,8 +13,8 @@ Frames: world (z up); joints (7,) radians; metres, degrees.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Optional, Sequence
 
 import numpy as np
 
@@ -51,7 +51,7 @@ class PathResult:
     """
 
     ok: bool
-    reason: Optional[str]
+    reason: str | None
     index: int
     samples: int
     collisions: list = field(default_factory=list)
@@ -66,13 +66,21 @@ def substeps(T_a: np.ndarray, T_b: np.ndarray, step_m: float, step_deg: float) -
     """The fewest equal parts of the step from camera pose ``T_a`` to ``T_b`` (4, 4) in which
     the camera moves at most ``step_m`` and turns at most ``step_deg`` (at least 1)."""
     dist = float(np.linalg.norm(T_b[:3, 3] - T_a[:3, 3]))
-    return max(1, int(math.ceil(max(dist / step_m, _angle_deg(T_a[:3, :3], T_b[:3, :3])
-                                    / step_deg) - 1e-9)))
+    return max(
+        1,
+        int(math.ceil(max(dist / step_m, _angle_deg(T_a[:3, :3], T_b[:3, :3]) / step_deg) - 1e-9)),
+    )
 
 
-def check_motion(robot, q: np.ndarray, poses: Sequence[np.ndarray], cfg: PathCheckConfig,
-                 obstacle_ids: Sequence[int], ignore_body_ids: Sequence[int] = (),
-                 padded_ids: Sequence[int] = ()) -> PathResult:
+def check_motion(
+    robot,
+    q: np.ndarray,
+    poses: Sequence[np.ndarray],
+    cfg: PathCheckConfig,
+    obstacle_ids: Sequence[int],
+    ignore_body_ids: Sequence[int] = (),
+    padded_ids: Sequence[int] = (),
+) -> PathResult:
     """Check the motion through joints ``q`` (n, 7) whose camera poses are ``poses`` (n of
     (4, 4), world): each step from ``q[i]`` to ``q[i + 1]`` is cut into :func:`substeps`
     parts and the robot at every part's end must be clear of ``obstacle_ids`` (less
@@ -91,8 +99,9 @@ def check_motion(robot, q: np.ndarray, poses: Sequence[np.ndarray], cfg: PathChe
             count += 1
             hits = robot.in_collision(qk, plain, ignore_body_ids)
             if padded and not hits:  # the robot is at qk already
-                hits = robot.in_collision(None, padded, ignore_body_ids, margin=margin,
-                                          self_collision=False)
+                hits = robot.in_collision(
+                    None, padded, ignore_body_ids, margin=margin, self_collision=False
+                )
             if hits:
                 return PathResult(False, "collision", i, count, list(hits))
     return PathResult(True, None, len(q) - 1, count)
@@ -107,6 +116,7 @@ def distance_to_path(points: np.ndarray, path: np.ndarray) -> np.ndarray:
     a, b = path[:-1], path[1:]  # (m-1, 3) segments
     ab = b - a
     t = np.einsum("nmk,mk->nm", points[:, None, :] - a[None], ab) / np.maximum(
-        np.einsum("mk,mk->m", ab, ab), 1e-18)
+        np.einsum("mk,mk->m", ab, ab), 1e-18
+    )
     closest = a[None] + np.clip(t, 0.0, 1.0)[..., None] * ab[None]
     return np.linalg.norm(points[:, None, :] - closest, axis=2).min(axis=1)

@@ -19,13 +19,20 @@ _CUP_Y_SIGN = {"L": -1.0, "R": 1.0, "B": 0.0}
 def _pattern_name(pattern) -> str:
     name = getattr(pattern, "name", pattern)  # accepts "L" or GraspClass.L
     if name not in _CUP_Y_SIGN:
-        raise ValueError(f"grasp pattern must be one of L, R, B (got {pattern!r}); "
-                         "NG has no target pose")
+        raise ValueError(
+            f"grasp pattern must be one of L, R, B (got {pattern!r}); NG has no target pose"
+        )
     return name
 
 
-def target_camera_pose(center_cam: np.ndarray, normal_cam: np.ndarray, x_axis_cam: np.ndarray,
-                       pattern, standoff: float = 0.15, cup_offset: float = 0.035) -> np.ndarray:
+def target_camera_pose(
+    center_cam: np.ndarray,
+    normal_cam: np.ndarray,
+    x_axis_cam: np.ndarray,
+    pattern,
+    standoff: float = 0.15,
+    cup_offset: float = 0.035,
+) -> np.ndarray:
     """``T_cam0_cam_target``: where the camera must be to grasp a surface with ``pattern``.
 
     Camera z is the anti-normal (looking straight at the surface), camera x is ``x_axis_cam``
@@ -61,8 +68,10 @@ def target_camera_pose(center_cam: np.ndarray, normal_cam: np.ndarray, x_axis_ca
         raise ValueError("normal_cam has zero length")
     n = n / n_norm
     if n @ c > 0:
-        raise ValueError(f"normal_cam {n} points away from the camera for a surface at {c}: "
-                         "pass the normal that faces the camera (normal @ center < 0)")
+        raise ValueError(
+            f"normal_cam {n} points away from the camera for a surface at {c}: "
+            "pass the normal that faces the camera (normal @ center < 0)"
+        )
     z = -n
     x = a - (a @ z) * z
     if np.linalg.norm(x) < 1e-6:

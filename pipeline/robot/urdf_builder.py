@@ -54,14 +54,37 @@ _ARM_JOINTS = [
     ("joint1", "link_base", "link1", (0, 0, 0.267), (0, 0, 0), -6.28318530718, 6.28318530718, 50.0),
     ("joint2", "link1", "link2", (0, 0, 0), (-1.5708, 0, 0), -2.059, 2.0944, 50.0),
     ("joint3", "link2", "link3", (0.0535, -0.2845, 0), (0, 0, 0), -3.927, 0.19198, 32.0),
-    ("joint4", "link3", "link4", (0.0775, 0.3425, 0), (-1.5708, 0, 0), -6.28318530718,
-     6.28318530718, 32.0),
+    (
+        "joint4",
+        "link3",
+        "link4",
+        (0.0775, 0.3425, 0),
+        (-1.5708, 0, 0),
+        -6.28318530718,
+        6.28318530718,
+        32.0,
+    ),
     ("joint5", "link4", "link5", (0, 0, 0), (1.5708, 0, 0), -1.69297, 3.14159265359, 32.0),
-    ("joint6", "link5", "link6", (0.076, 0.097, 0), (-1.5708, 0, 0), -6.28318530718,
-     6.28318530718, 20.0),
+    (
+        "joint6",
+        "link5",
+        "link6",
+        (0.076, 0.097, 0),
+        (-1.5708, 0, 0),
+        -6.28318530718,
+        6.28318530718,
+        20.0,
+    ),
 ]
-_ARM_MASSES = {"link_base": 2.7, "link1": 2.16, "link2": 1.71, "link3": 1.384, "link4": 1.115,
-               "link5": 1.275, "link6": 0.1096}
+_ARM_MASSES = {
+    "link_base": 2.7,
+    "link1": 2.16,
+    "link2": 1.71,
+    "link3": 1.384,
+    "link4": 1.115,
+    "link5": 1.275,
+    "link6": 0.1096,
+}
 
 
 @dataclass(frozen=True)
@@ -101,19 +124,23 @@ def _shape_xml(shape, material: str, rgba: str) -> str:
     else:
         origin = f'<origin xyz="{_fmt(shape.center)}" rpy="0 0 0"/>'
         geom = f'<box size="{_fmt(shape.size)}"/>'
-    return (f"    <visual>{origin}<geometry>{geom}</geometry>"
-            f'<material name="{material}"><color rgba="{rgba}"/></material></visual>\n'
-            f"    <collision>{origin}<geometry>{geom}</geometry></collision>\n")
+    return (
+        f"    <visual>{origin}<geometry>{geom}</geometry>"
+        f'<material name="{material}"><color rgba="{rgba}"/></material></visual>\n'
+        f"    <collision>{origin}<geometry>{geom}</geometry></collision>\n"
+    )
 
 
 def _link_xml(name: str, shapes, mass: float, rgba: str) -> str:
     # Inertial frame = link frame, so pybullet's link "COM" pose is the URDF link frame.
     i = 1e-3 * max(mass, 0.01)
     body = "".join(_shape_xml(s, f"{name}_color", rgba) for s in shapes)
-    return (f'  <link name="{name}">\n{body}'
-            f'    <inertial><origin xyz="0 0 0" rpy="0 0 0"/><mass value="{mass:.6g}"/>'
-            f'<inertia ixx="{i:.3g}" ixy="0" ixz="0" iyy="{i:.3g}" iyz="0" izz="{i:.3g}"/>'
-            f"</inertial>\n  </link>\n")
+    return (
+        f'  <link name="{name}">\n{body}'
+        f'    <inertial><origin xyz="0 0 0" rpy="0 0 0"/><mass value="{mass:.6g}"/>'
+        f'<inertia ixx="{i:.3g}" ixy="0" ixz="0" iyy="{i:.3g}" iyz="0" izz="{i:.3g}"/>'
+        f"</inertial>\n  </link>\n"
+    )
 
 
 def _link_shapes() -> dict[str, list]:
@@ -122,26 +149,35 @@ def _link_shapes() -> dict[str, list]:
         # Base housing: the real base is about 0.13 m across; joint 1 sits at z = 0.267.
         "link_base": [_Cylinder((0, 0, 0), (0, 0, 0.16), 0.065)],
         # Column up to the shoulder, and the shoulder housing along the joint-2 axis (link1 y).
-        "link1": [_Cylinder((0, 0, -0.105), (0, 0, 0.0), 0.06),
-                  _Cylinder((0, -0.065, 0), (0, 0.065, 0), 0.06)],
+        "link1": [
+            _Cylinder((0, 0, -0.105), (0, 0, 0.0), 0.06),
+            _Cylinder((0, -0.065, 0), (0, 0.065, 0), 0.06),
+        ],
         # Upper arm shoulder → elbow, and the elbow housing along joint 3's axis (z).
-        "link2": [_Cylinder((0, 0, 0), (0.0535, -0.2845, 0), 0.045),
-                  _Cylinder((0.0535, -0.2845, -0.055), (0.0535, -0.2845, 0.055), 0.05)],
+        "link2": [
+            _Cylinder((0, 0, 0), (0.0535, -0.2845, 0), 0.045),
+            _Cylinder((0.0535, -0.2845, -0.055), (0.0535, -0.2845, 0.055), 0.05),
+        ],
         # Elbow offset, then the forearm tube along joint 4's axis (link3 y) up to the wrist.
-        "link3": [_Cylinder((0, 0, 0), (0.0775, 0, 0), 0.045),
-                  _Cylinder((0.0775, 0.0, 0), (0.0775, 0.29, 0), 0.042)],
+        "link3": [
+            _Cylinder((0, 0, 0), (0.0775, 0, 0), 0.045),
+            _Cylinder((0.0775, 0.0, 0), (0.0775, 0.29, 0), 0.042),
+        ],
         # Wrist housing of joint 5 (axis = link4 −y), centred on the wrist point.
         "link4": [_Cylinder((0, -0.05, 0), (0, 0.05, 0), 0.042)],
         # Wrist offset (x) and the joint-6 housing up to the flange (link5 y).
-        "link5": [_Cylinder((0, 0, 0), (0.076, 0, 0), 0.035),
-                  _Cylinder((0.076, 0.0, 0), (0.076, 0.09, 0), 0.035)],
+        "link5": [
+            _Cylinder((0, 0, 0), (0.076, 0, 0), 0.035),
+            _Cylinder((0.076, 0.0, 0), (0.076, 0.09, 0), 0.035),
+        ],
         # Flange disc and the hand's mounting bracket up to the tilt knuckle.
         "link6": [_Cylinder((0, 0, -0.01), (0, 0, HAND_PIVOT_FROM_FLANGE - 0.015), 0.032)],
         # Tilt knuckle (along y), a stem, and the cross bar that carries the cups and camera.
-        "hand": [_Cylinder((0, -0.02, 0), (0, 0.02, 0), 0.015),
-                 _Cylinder((0, 0, 0), (0, 0, CAMERA_FROM_PIVOT - 0.05), 0.012),
-                 _Box((0, 0, CAMERA_FROM_PIVOT - 0.045),
-                      (0.05, 2 * CUP_OFFSET + 0.02, 0.02))],
+        "hand": [
+            _Cylinder((0, -0.02, 0), (0, 0.02, 0), 0.015),
+            _Cylinder((0, 0, 0), (0, 0, CAMERA_FROM_PIVOT - 0.05), 0.012),
+            _Box((0, 0, CAMERA_FROM_PIVOT - 0.045), (0.05, 2 * CUP_OFFSET + 0.02, 0.02)),
+        ],
         # SR300-like bar, long along camera x, from the cross bar to the optical centre.
         "camera": [_Box((0, 0, -0.0175), (0.11, 0.02, 0.035))],
     }
@@ -150,35 +186,51 @@ def _link_shapes() -> dict[str, list]:
 def _cup_shapes() -> list:
     """One cup in its own frame (origin at the lip centre, z = camera z)."""
     rod_start = -(CUP_TIP_Z + 0.035)  # the cross bar's front face is at camera z = −0.035
-    return [_Cylinder((0, 0, rod_start), (0, 0, -CUP_PAD_LENGTH), CUP_ROD_RADIUS),
-            _Cylinder((0, 0, -CUP_PAD_LENGTH), (0, 0, 0), CUP_DIAMETER / 2)]
+    return [
+        _Cylinder((0, 0, rod_start), (0, 0, -CUP_PAD_LENGTH), CUP_ROD_RADIUS),
+        _Cylinder((0, 0, -CUP_PAD_LENGTH), (0, 0, 0), CUP_DIAMETER / 2),
+    ]
 
 
-def _joint_xml(name, kind, parent, child, xyz, rpy, lower=None, upper=None, effort=None,
-               axis=(0, 0, 1)) -> str:
-    s = (f'  <joint name="{name}" type="{kind}">\n    <parent link="{parent}"/>\n'
-         f'    <child link="{child}"/>\n    <origin xyz="{_fmt(xyz)}" rpy="{_fmt(rpy)}"/>\n')
+def _joint_xml(
+    name, kind, parent, child, xyz, rpy, lower=None, upper=None, effort=None, axis=(0, 0, 1)
+) -> str:
+    s = (
+        f'  <joint name="{name}" type="{kind}">\n    <parent link="{parent}"/>\n'
+        f'    <child link="{child}"/>\n    <origin xyz="{_fmt(xyz)}" rpy="{_fmt(rpy)}"/>\n'
+    )
     if kind == "revolute":
-        s += (f'    <axis xyz="{_fmt(axis)}"/>\n'
-              f'    <limit effort="{effort:.6g}" lower="{lower:.12g}" upper="{upper:.12g}" '
-              f'velocity="3.14"/>\n    <dynamics damping="1.0" friction="1.0"/>\n')
+        s += (
+            f'    <axis xyz="{_fmt(axis)}"/>\n'
+            f'    <limit effort="{effort:.6g}" lower="{lower:.12g}" upper="{upper:.12g}" '
+            f'velocity="3.14"/>\n    <dynamics damping="1.0" friction="1.0"/>\n'
+        )
     return s + "  </joint>\n"
 
 
 def build_urdf_xml() -> str:
     """The URDF text of the whole robot (see the module docstring for the frames)."""
     shapes = _link_shapes()
-    colors = {"link_base": "0.28 0.52 0.92 1", "link1": "0.85 0.19 0.21 1",
-              "link2": "0.95 0.76 0.05 1", "link3": "0.28 0.52 0.92 1",
-              "link4": "0.23 0.72 0.32 1", "link5": "0.85 0.19 0.21 1",
-              "link6": "0.753 0.753 0.753 1", "hand": "0.3 0.3 0.3 1", "camera": "0.1 0.1 0.1 1"}
-    out = ['<?xml version="1.0" encoding="utf-8"?>\n',
-           "<!-- Generated by pipeline/robot/urdf_builder.py; edit that file, not this one.\n"
-           "     xArm6 kinematics (pybullet_data xarm/xarm6_robot.urdf) with primitive geometry,\n"
-           "     a 1-DoF hand tilt (joint7), an OpenCV-frame camera link and two suction cups\n"
-           "     (cup_left at camera y = -0.035 m, cup_right at +0.035 m, lips at camera z = "
-           f"{CUP_TIP_Z} m). -->\n",
-           '<robot name="binpick_robot">\n']
+    colors = {
+        "link_base": "0.28 0.52 0.92 1",
+        "link1": "0.85 0.19 0.21 1",
+        "link2": "0.95 0.76 0.05 1",
+        "link3": "0.28 0.52 0.92 1",
+        "link4": "0.23 0.72 0.32 1",
+        "link5": "0.85 0.19 0.21 1",
+        "link6": "0.753 0.753 0.753 1",
+        "hand": "0.3 0.3 0.3 1",
+        "camera": "0.1 0.1 0.1 1",
+    }
+    out = [
+        '<?xml version="1.0" encoding="utf-8"?>\n',
+        "<!-- Generated by pipeline/robot/urdf_builder.py; edit that file, not this one.\n"
+        "     xArm6 kinematics (pybullet_data xarm/xarm6_robot.urdf) with primitive geometry,\n"
+        "     a 1-DoF hand tilt (joint7), an OpenCV-frame camera link and two suction cups\n"
+        "     (cup_left at camera y = -0.035 m, cup_right at +0.035 m, lips at camera z = "
+        f"{CUP_TIP_Z} m). -->\n",
+        '<robot name="binpick_robot">\n',
+    ]
     for name in ["link_base", "link1", "link2", "link3", "link4", "link5", "link6"]:
         out.append(_link_xml(name, shapes[name], _ARM_MASSES[name], colors[name]))
     out.append(_link_xml("hand", shapes["hand"], 0.3, colors["hand"]))
@@ -187,13 +239,25 @@ def build_urdf_xml() -> str:
         out.append(_link_xml(cup, _cup_shapes(), 0.02, "0.9 0.9 0.9 1"))
     for name, parent, child, xyz, rpy, lo, hi, effort in _ARM_JOINTS:
         out.append(_joint_xml(name, "revolute", parent, child, xyz, rpy, lo, hi, effort))
-    out.append(_joint_xml("joint7", "revolute", "link6", "hand", (0, 0, HAND_PIVOT_FROM_FLANGE),
-                          (0, 0, 0), -HAND_TILT_LIMIT, HAND_TILT_LIMIT, 10.0, axis=(0, 1, 0)))
-    out.append(_joint_xml("camera_joint", "fixed", "hand", "camera", (0, 0, CAMERA_FROM_PIVOT),
-                          (0, 0, 0)))
+    out.append(
+        _joint_xml(
+            "joint7",
+            "revolute",
+            "link6",
+            "hand",
+            (0, 0, HAND_PIVOT_FROM_FLANGE),
+            (0, 0, 0),
+            -HAND_TILT_LIMIT,
+            HAND_TILT_LIMIT,
+            10.0,
+            axis=(0, 1, 0),
+        )
+    )
+    out.append(
+        _joint_xml("camera_joint", "fixed", "hand", "camera", (0, 0, CAMERA_FROM_PIVOT), (0, 0, 0))
+    )
     for cup, y in (("cup_left", -CUP_OFFSET), ("cup_right", CUP_OFFSET)):
-        out.append(_joint_xml(f"{cup}_joint", "fixed", "camera", cup, (0, y, CUP_TIP_Z),
-                              (0, 0, 0)))
+        out.append(_joint_xml(f"{cup}_joint", "fixed", "camera", cup, (0, y, CUP_TIP_Z), (0, 0, 0)))
     out.append("</robot>\n")
     return "".join(out)
 

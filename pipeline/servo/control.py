@@ -70,7 +70,6 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
-from typing import Optional
 
 import numpy as np
 
@@ -100,14 +99,19 @@ class ServoConfig:
     uniform_clamp: bool  # one scale factor for V and Ω (keeps their ratio)
     # (3,) desired position of the surface centre in the camera frame at the goal (m), or None:
     # a goal other than Eqs. 17–18's (the closed loop's pre-grasp above the grasp pose)
-    target_point: Optional[tuple]
+    target_point: tuple | None
 
 
 def servo_config(cfg) -> ServoConfig:
     """The ``ServoConfig`` of a composed config: ``cfg.servo`` (gain, tolerances, speed
     limits), d* and the cup offset from ``cfg.hand``, the goal of Eqs. 17–18."""
-    return from_section(ServoConfig, cfg.servo, standoff=float(cfg.hand.standoff),
-                        cup_offset=float(cfg.hand.cup_offset), target_point=None)
+    return from_section(
+        ServoConfig,
+        cfg.servo,
+        standoff=float(cfg.hand.standoff),
+        cup_offset=float(cfg.hand.cup_offset),
+        target_point=None,
+    )
 
 
 @dataclass
@@ -137,7 +141,7 @@ class ServoCommand:
     rotation_error_deg: float
     linear_speed: float
     angular_speed: float
-    axis_used: Optional[str]
+    axis_used: str | None
 
 
 def _pattern_name(pattern) -> str:
@@ -235,8 +239,9 @@ def _signed_term(axis: np.ndarray, reference: np.ndarray) -> tuple[float, np.nda
     return _angle(a, r), np.array([0.0, 0.0, math.atan2(-a[1], a[0])])
 
 
-def _rotation_error(normal_cam, warped_long, warped_short, reference_x=None
-                    ) -> tuple[np.ndarray, Optional[str]]:
+def _rotation_error(
+    normal_cam, warped_long, warped_short, reference_x=None
+) -> tuple[np.ndarray, str | None]:
     n_towards = _vec3(normal_cam, "normal_cam")
     norm = float(np.linalg.norm(n_towards))
     if norm < 1e-12:
@@ -306,9 +311,16 @@ def clamp_twist(twist, cfg: ServoConfig) -> tuple[np.ndarray, float]:
     return np.concatenate([t[:3] * s_v, t[3:] * s_w]), min(s_v, s_w)
 
 
-def servo_velocity(center_cam, normal_cam, warped_long, warped_short, pattern,
-                   cfg: ServoConfig, dt: float | None = None,
-                   reference_x=None) -> ServoCommand:
+def servo_velocity(
+    center_cam,
+    normal_cam,
+    warped_long,
+    warped_short,
+    pattern,
+    cfg: ServoConfig,
+    dt: float | None = None,
+    reference_x=None,
+) -> ServoCommand:
     """Eq. 23: the camera twist that drives ``e`` to zero, clamped to the speed limits.
 
     Args:
@@ -341,9 +353,21 @@ def servo_velocity(center_cam, normal_cam, warped_long, warped_short, pattern,
     raw = -lam * np.linalg.solve(M, e)
     vel, scale = clamp_twist(raw, cfg)
     rot_deg = math.degrees(float(np.linalg.norm(u_theta)))
-    converged = bool(abs(e_p[0]) < cfg.tolerance_xy and abs(e_p[1]) < cfg.tolerance_xy
-                     and abs(e_p[2]) < cfg.tolerance_log_z and rot_deg < cfg.tolerance_rot_deg)
-    return ServoCommand(velocity=vel, error=e, converged=converged, raw_velocity=raw,
-                        scale=scale, feature_error=float(np.linalg.norm(e_p)),
-                        rotation_error_deg=rot_deg, linear_speed=float(np.linalg.norm(vel[:3])),
-                        angular_speed=float(np.linalg.norm(vel[3:])), axis_used=axis_used)
+    converged = bool(
+        abs(e_p[0]) < cfg.tolerance_xy
+        and abs(e_p[1]) < cfg.tolerance_xy
+        and abs(e_p[2]) < cfg.tolerance_log_z
+        and rot_deg < cfg.tolerance_rot_deg
+    )
+    return ServoCommand(
+        velocity=vel,
+        error=e,
+        converged=converged,
+        raw_velocity=raw,
+        scale=scale,
+        feature_error=float(np.linalg.norm(e_p)),
+        rotation_error_deg=rot_deg,
+        linear_speed=float(np.linalg.norm(vel[:3])),
+        angular_speed=float(np.linalg.norm(vel[3:])),
+        axis_used=axis_used,
+    )

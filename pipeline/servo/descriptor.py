@@ -25,18 +25,19 @@ Algorithm and the choices made where the paper is vague:
    ``window`` × ``window`` (21 × 21) window centred on the rounded seed, clipped to the image;
    at least 10 points are needed. The fit is the least-squares plane (the smallest singular
    vector of the centred points; computed as the scatter matrix's eigenvector, which is the
-   same thing, by ``labelling.surfaces.fit_plane``). Additions, so that a window that
+   same thing, by ``grasping.surfaces.fit_plane``). Additions, so that a window that
    overlaps another surface (a seed near an edge; a box side face is only ~20 px tall) still
    gives the seed's plane: (a) ``window_hypotheses`` (default 50) RANSAC planes through three
    random window points (fixed-seed generator: reproducible) are scored by their window points
    within ε1; the best of those that hold the seed point (within ε1) — of all of them if none
-   does, e.g. when the seed is a depth spike — selects the points that are fitted; (b) ``window_refits``
+   does, e.g. when the seed is a depth spike — selects the points that are fitted; (b)
+   ``window_refits``
    (default 2) least-squares refits on the window points within ε1 of the previous fit. When
    the whole window lies on one plane this is exactly the paper's SVD of all its points;
    ``window_hypotheses=0, window_refits=0`` is the paper's fit in every case.
    ``SurfaceFeatures.plane`` is (n̂, D̂) of this fit, n̂ towards the camera (so D̂ = −n̂ · P > 0).
 2. **Per-pixel normals (Eq. 14)** by central differences of the back-projected image (the exact
-   cross product, rewritten with fewer image-sized operations, see ``_rules``), normalised and
+   cross product, rewritten with fewer image-sized operations, see ``plane_rules``), normalised and
    flipped towards the camera (Eq. 14's cross product itself points away from the camera for a
    visible surface, see ``planner.ranking``). n_p is undefined on the image border and where
    the pixel or one of its four neighbours has no data; such pixels fail Eq. 13.
@@ -75,14 +76,14 @@ Algorithm and the choices made where the paper is vague:
    surface (``"region_too_small"``).
 6. **Surface geometry.** If ``refine`` (default), the plane is refitted by least squares on all
    the region's points, and ``normal_cam`` is that plane's normal; otherwise n̂. The centre,
-   axes and lengths are computed exactly as for the labels (``labelling.surfaces.region_surface``):
+   axes and lengths are computed exactly as for the labels (``grasping.surfaces.region_surface``):
    the rays through the region's pixel centres are intersected with the plane and the
    minimum-area rectangle of those points gives the centre (the centre of the visible region,
    on the plane, not the centroid of the points), the long / short axes and L_l, L_s (which
    can be up to one pixel footprint shorter than the region, the samples being pixel centres).
    ``center_px`` = g' is the centre projected into the image. Axis signs as in the labels:
    ``long_axis_cam`` has camera-x ≥ 0, ``short = normal × long``.
-7. **Warped perspective** as in hand-level labelling (``labelling.hand.warped_axes``): R0 is the
+7. **Warped perspective** as in hand-level labelling (``grasping.hand.warped_axes``): R0 is the
    minimal rotation with R0 Z = −n; ñ = R0ᵀ n_axis, i.e. the axis rotated by the minimal
    rotation taking −n onto the camera's +Z. ñ lies in the camera X-Y plane; its z component
    (~1e-16 after the rotation) is set to exactly 0 and it is renormalised. For a level surface
@@ -100,23 +101,35 @@ plane filling the whole image ~20 ms (Eq. 14 and the rectangle on every pixel).
 
 from __future__ import annotations
 
-
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 from pipeline.camera.depth_input import check_depth_image
 from pipeline.camera.geometry import Intrinsics
 from pipeline.config.build import from_section
-from pipeline.labelling.hand import warped_axes
-from pipeline.labelling.surfaces import fit_plane, region_surface
-from pipeline.labelling.types import FaceFrame
+from pipeline.grasping.hand import warped_axes
+from pipeline.grasping.surfaces import fit_plane, region_surface
+from pipeline.grasping.types import FaceFrame
+from pipeline.servo.region import (
+    NoSurface,
+    PlaneCrop,
+    SeedWindow,
+    crop_points,
+    grown_region,
+    seed_pixel,
+    window_plane,
+)
 
-MIN_WINDOW_POINTS = 10
-# The reasons ``describe_surface`` gives for finding no surface (see its docstring).
-NO_SURFACE_REASONS = ("seed_outside_image", "no_depth_at_seed", "too_few_window_points",
-                      "no_region_at_seed", "region_too_small", "edge_on", "surface_changed")
+NO_SURFACE_REASONS = (
+    "seed_outside_image",
+    "no_depth_at_seed",
+    "too_few_window_points",
+    "no_region_at_seed",
+    "region_too_small",
+    "edge_on",
+    "surface_changed",
+)
 
 
 @dataclass
@@ -156,13 +169,13 @@ class DescriptorConfig:
             when the seed fails the rules).
         track_normal_deg: with an expected normal (``describe_surface(expected_normal_cam=)``,
             the tracked surface's normal carried from the previous frame), the window plane
-            takes that orientation (``_tracked_plane``), and a surface found farther than this
+            takes that orientation (``tracked_plane``), and a surface found farther than this
             angle from it is "surface_changed" (0 = off, the paper: the plane at the seed,
             whatever it is).
         track_offset_m: with an expected normal and an expected point
             (``describe_surface(expected_point_cam=)``, a point of the tracked surface carried
             into this frame), only window slabs within this distance (m) of the tracked plane
-            compete (``_tracked_plane``; None = the normal only).
+            compete (``tracked_plane``; None = the normal only).
     """
 
     window: int
@@ -188,7 +201,7 @@ def descriptor_config(cfg) -> DescriptorConfig:
 
 @dataclass
 class SurfaceFeatures(FaceFrame):
-    """The descriptor's output for one surface: a :class:`~pipeline.labelling.types.FaceFrame`
+    """The descriptor's output for one surface: a :class:`~pipeline.grasping.types.FaceFrame`
     (g' = ``center_px``, the centre on the refined plane, its normal, axes, L_l, L_s of the
     region's rectangle and the region's area) and:
 
@@ -207,182 +220,15 @@ class SurfaceFeatures(FaceFrame):
     region: np.ndarray
 
 
-def _rules(X: np.ndarray, Y: np.ndarray, Z: np.ndarray, valid: np.ndarray, xn: np.ndarray,
-           yn: np.ndarray, n_hat: np.ndarray, d_hat: float,
-           cfg: "DescriptorConfig") -> tuple[np.ndarray, np.ndarray]:
-    """(Eq. 12 mask, Eqs. 12 & 13 mask), both (h, w) bool, of an image (or a crop of one).
-
-    Args:
-        X, Y, Z: (h, w) float32 back-projected coordinates (Z = 0 where no data).
-        valid: (h, w) bool, depth available.
-        xn, yn: (w,), (h,) float32 normalised image coordinates of the columns / rows.
-        n_hat, d_hat: the plane of Eq. 11, n̂ towards the camera.
-
-    Eq. 14 with P = Z (xn, yn, 1): along a row yn is constant and along a column xn is, so
-    with du = Z(u+1) − Z(u−1), dv = Z(v+1) − Z(v−1), A = X(u+1) − X(u−1), B = Y(v+1) − Y(v−1):
-    a = P(u+1) − P(u−1) = (A, yn du, du), b = P(v+1) − P(v−1) = (xn dv, B, dv) and
-    a × b = (du (yn dv − B), dv (xn du − A), A B − xn yn du dv) — the exact cross product with
-    fewer image-sized operations. n_p is flipped towards the camera where (a × b) · P > 0, and
-    Eq. 13, 2 − 2 n_p · n̂ < ε2, is tested as s (c · n̂) > (1 − ε2 / 2) |c| (s the flip sign).
-    """
-    h, w = Z.shape
-    nx, ny, nz = (np.float32(x) for x in n_hat)
-    dist = X * nx
-    dist += Y * ny
-    dist += Z * nz
-    dist += np.float32(d_hat)
-    on_plane = valid & (np.abs(dist) < np.float32(cfg.eps_distance))  # Eq. 12 (with n̂)
-    rules = np.zeros((h, w), dtype=bool)
-    if h < 3 or w < 3:
-        return on_plane, rules
-    xi, yi = xn[None, 1:-1], yn[1:-1, None]
-    du = Z[1:-1, 2:] - Z[1:-1, :-2]
-    dv = Z[2:, 1:-1] - Z[:-2, 1:-1]
-    A = X[1:-1, 2:] - X[1:-1, :-2]
-    B = Y[2:, 1:-1] - Y[:-2, 1:-1]
-    cx = du * (yi * dv - B)  # Eq. 14, away from the camera for a visible surface
-    cy = dv * (xi * du - A)
-    cz = A * B - (xi * yi) * (du * dv)
-    defined = (valid[1:-1, 1:-1] & valid[1:-1, 2:] & valid[1:-1, :-2] & valid[2:, 1:-1]
-               & valid[:-2, 1:-1])
-    towards = cx * xi
-    towards += cy * yi
-    towards += cz  # (c · P) / Z
-    length2 = cx * cx
-    length2 += cy * cy
-    length2 += cz * cz
-    k = np.float32(1.0 - cfg.eps_normal / 2.0)
-    if cfg.normal_smoothing > 0:
-        # Unit n_p towards the camera (0 where undefined), box-averaged, renormalised.
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv = np.where(defined & (length2 > 0), np.float32(1.0) / np.sqrt(length2),
-                           np.float32(0.0))
-        inv = np.where(towards > 0, -inv, inv)
-        size = (2 * cfg.normal_smoothing + 1,) * 2
-        mx, my, mz = (cv2.blur(c * inv, size, borderType=cv2.BORDER_CONSTANT)
-                      for c in (cx, cy, cz))
-        dot = mx * nx
-        dot += my * ny
-        dot += mz * nz
-        norm2 = mx * mx
-        norm2 += my * my
-        norm2 += mz * mz
-        ok = (dot > 0) & (dot * dot > (k * k) * norm2)
-    else:
-        dot = cx * nx
-        dot += cy * ny
-        dot += cz * nz
-        dot = np.where(towards > 0, -dot, dot)  # flip n_p towards the camera
-        ok = (dot > 0) & (dot * dot > (k * k) * length2)
-    rules[1:-1, 1:-1] = ok & defined
-    rules &= on_plane
-    return on_plane, rules
-
-
-def _window_plane(win: np.ndarray, seed_point: np.ndarray, cfg: DescriptorConfig,
-                  expected: np.ndarray | None = None,
-                  expected_point: np.ndarray | None = None) -> tuple[np.ndarray, float]:
-    """Eq. 11: the plane (n̂ towards the camera, c = n̂ · P) of the (N, 3) window points, N ≥ 10.
-
-    With ``cfg.window_hypotheses`` > 0 the points are first restricted to the seed's surface
-    (RANSAC): planes through three random window points (a fixed-seed generator, so the result
-    is reproducible) are scored by their points within ε1; among the planes that hold the seed
-    point (within ε1), or among all if none does (the seed is an outlier, e.g. a depth spike),
-    the one with most points is kept, and its points are fitted. Then ``cfg.window_refits``
-    least-squares refits on the points within ε1. With ``cfg.window_tolerance_depth`` the
-    hypotheses' tolerance shrinks with the seed's depth (see ``DescriptorConfig``). With an
-    ``expected`` unit normal (3,) and ``cfg.track_normal_deg``: :func:`_tracked_plane` (with
-    ``expected_point``, if given).
-    """
-    if expected is not None and cfg.track_normal_deg > 0:
-        return _tracked_plane(win, seed_point, cfg, expected, expected_point)
-    used = np.ones(len(win), dtype=bool)
-    if cfg.window_hypotheses > 0:
-        rng = np.random.default_rng(0)
-        pick = rng.integers(0, len(win), size=(cfg.window_hypotheses, 3))
-        p0 = win[pick[:, 0]]
-        a, b = win[pick[:, 1]] - p0, win[pick[:, 2]] - p0
-        n = np.cross(a, b)
-        length = np.linalg.norm(n, axis=1)
-        # Well-conditioned triangles only: the two edges at p0 at least ~6° apart.
-        ok = (length > 0) & (length > 0.1 * np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1))
-        if ok.any():
-            n, p0 = n[ok] / length[ok, None], p0[ok]
-            offset = np.einsum("ki,ki->k", n, p0)
-            tol = _hypothesis_tolerance(seed_point, cfg)
-            inliers = np.abs(win @ n.T - offset) < tol  # (N, K)
-            counts = inliers.sum(axis=0)
-            holds_seed = np.abs(n @ seed_point - offset) < tol
-            if holds_seed.any():
-                counts = np.where(holds_seed, counts, -1)
-            best = int(np.argmax(counts))
-            if counts[best] >= MIN_WINDOW_POINTS:
-                used = inliers[:, best]
-    n_hat, c_hat, _, _ = fit_plane(win[used])
-    for _ in range(cfg.window_refits):
-        inl = np.abs(win @ n_hat - c_hat) < cfg.eps_distance
-        if inl.sum() < MIN_WINDOW_POINTS or np.array_equal(inl, used):
-            break
-        used = inl
-        n_hat, c_hat, _, _ = fit_plane(win[used])
-    return n_hat, c_hat
-
-
-def _hypothesis_tolerance(seed_point: np.ndarray, cfg: DescriptorConfig) -> float:
-    """The window planes' inlier tolerance: ε1, times min(1, Z_seed / window_tolerance_depth)
-    when that is set (metres)."""
-    tol = cfg.eps_distance
-    if cfg.window_tolerance_depth > 0:
-        tol *= min(1.0, float(seed_point[2]) / cfg.window_tolerance_depth)
-    return tol
-
-
-def _tracked_plane(win: np.ndarray, seed_point: np.ndarray, cfg: DescriptorConfig,
-                   expected: np.ndarray, expected_point: np.ndarray | None = None
-                   ) -> tuple[np.ndarray, float]:
-    """The window plane while tracking a surface of known normal ``expected`` (3,, unit): the
-    plane of that normal through the window point that most window points lie within the
-    hypotheses' tolerance of (the largest slab of the tracked orientation), its offset the mean
-    of those points'. A seed carried to the next frame can sit on the edge or the next face of
-    a box; the window's own best plane is then one across both faces, and the region grown
-    from it is the wrong face or nothing. The region found from this plane is refitted
-    (``cfg.refine``), so the surface's normal is measured afresh in every frame.
-
-    With ``expected_point`` (3,), a point of the tracked surface carried into this frame, and
-    ``cfg.track_offset_m`` set: only the slabs within that distance of the tracked plane count.
-    Parallel planes share the normal: the top of a cube and the bin floor 7 cm below it both
-    face the camera, and a window mostly on the floor made the servo follow the floor. When no
-    window point is that near, the plane is the tracked one (the region grows from it, or
-    nothing grows: the target is lost)."""
-    n = np.asarray(expected, np.float64)
-    n = n if n @ seed_point < 0 else -n  # towards the camera, as fit_plane's
-    tol = _hypothesis_tolerance(seed_point, cfg)
-    d = win @ n
-    counts = (np.abs(d[None, :] - d[:, None]) < tol).sum(axis=1)  # (N,) per candidate offset
-    if expected_point is not None and cfg.track_offset_m is not None:
-        tracked = float(n @ np.asarray(expected_point, np.float64))
-        near = np.abs(d - tracked) < float(cfg.track_offset_m)
-        if not near.any():
-            return n, tracked
-        counts = np.where(near, counts, -1)
-    used = np.abs(d - d[int(np.argmax(counts))]) < tol
-    return n, float(d[used].mean())
-
-
-def split_region(points: np.ndarray, sites: np.ndarray) -> np.ndarray:
-    """(n,) bool: which of the region's ``points`` (n, 3) are nearer to ``sites[0]`` than to
-    every other site of ``sites`` (k, 3) (its Voronoi cell; ties stay). Same frame and unit for
-    both. Two equal faces side by side with a site at each centre split at their seam."""
-    d2 = ((points[:, None, :] - sites[None, :, :]) ** 2).sum(-1)  # (n, k)
-    return d2[:, 0] <= d2[:, 1:].min(axis=1)
-
-
-def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
-                     cfg: DescriptorConfig,
-                     expected_normal_cam: np.ndarray | None = None,
-                     sites_cam: np.ndarray | None = None,
-                     expected_point_cam: np.ndarray | None = None,
-                     ) -> tuple[SurfaceFeatures | None, str]:
+def describe_surface(
+    depth_m: np.ndarray,
+    intrinsics: Intrinsics,
+    seed_uv,
+    cfg: DescriptorConfig,
+    expected_normal_cam: np.ndarray | None = None,
+    sites_cam: np.ndarray | None = None,
+    expected_point_cam: np.ndarray | None = None,
+) -> tuple[SurfaceFeatures | None, str]:
     """Surface features of the planar surface at ``seed_uv`` (paper Sec. 5.1; see the module
     docstring for the algorithm).
 
@@ -402,7 +248,7 @@ def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
             that lie in the region, where coplanar faces of two boxes grew into one region.
         expected_point_cam: (3,) optional, a point of the tracked surface in this camera frame,
             metres; the surface's plane may be at most ``cfg.track_offset_m`` from it along the
-            expected normal (not the paper; with ``expected_normal_cam``: ``_tracked_plane``).
+            expected normal (not the paper; with ``expected_normal_cam``: ``tracked_plane``).
 
     Returns:
         (features, "") when a surface is found, else (None, reason) with reason one of
@@ -426,167 +272,90 @@ def describe_surface(depth_m: np.ndarray, intrinsics: Intrinsics, seed_uv,
     H, W = intrinsics.height, intrinsics.width
     # float32 metres, 0 = no data (NaN, ±inf, ≤ 0, implausible): a fresh array.
     Z = check_depth_image(depth_m, (H, W), name="depth_m")
-    try:
-        seed = np.asarray(seed_uv, dtype=np.float64).reshape(-1)
-    except (TypeError, ValueError):
-        seed = np.zeros(0)
-    if seed.shape != (2,):
-        raise ValueError(f"seed_uv must be a pixel (u, v), got {seed_uv!r}")
-    if not (np.isfinite(seed).all() and -1 <= seed[0] <= W and -1 <= seed[1] <= H):
-        return None, "seed_outside_image"
-    u = int(round(float(seed[0])))
-    v = int(round(float(seed[1])))
-    if not (0 <= u < W and 0 <= v < H):
-        return None, "seed_outside_image"
-
     # Back-projection P = Z (xn, yn, 1), as camera.backproject; X = Z xn and Y = Z yn are only
     # formed where needed (the window, the crop).
-    valid = Z > 0
-    if not valid[v, u] and not cfg.seed_repair:
-        return None, "no_depth_at_seed"
-    xn = ((np.arange(W, dtype=np.float32) - np.float32(intrinsics.cx))
-          / np.float32(intrinsics.fx))
-    yn = ((np.arange(H, dtype=np.float32) - np.float32(intrinsics.cy))
-          / np.float32(intrinsics.fy))
-
-    # (1) Eq. 11: plane of the seed window.
-    h = cfg.window // 2
-    v0, v1, u0, u1 = max(v - h, 0), min(v + h + 1, H), max(u - h, 0), min(u + h + 1, W)
-    wv, wu = np.nonzero(valid[v0:v1, u0:u1])
-    if not valid[v, u] and len(wv) == 0:
-        return None, "no_depth_at_seed"
-    if len(wv) < MIN_WINDOW_POINTS:
-        return None, "too_few_window_points"
-    wv, wu = wv + v0, wu + u0
-    zw = Z[wv, wu].astype(np.float64)
-    win = np.stack([zw * xn[wu], zw * yn[wv], zw], axis=1)
-    # The seed's depth: the median of its 3 × 3 neighbourhood when the seed pixel is more than
-    # ε1 from it (a one-pixel crack between two boxes, or a spike): the window plane must be the
-    # surface around the seed, not the crack's.
-    # A seed pixel without data (a sensor's hole) takes the depth of the nearest window pixel
-    # that has one, with seed_repair; the region then grows from the nearest rule pixel (below).
-    z_seed = float(Z[v, u])
-    if z_seed <= 0:
-        k = int(np.argmin((wv - v) ** 2 + (wu - u) ** 2))  # the first of equally near ones
-        z_seed = float(Z[wv[k], wu[k]])
-    around = Z[max(v - 1, 0):v + 2, max(u - 1, 0):u + 2]
-    around = around[around > 0]
-    z_around = float(np.median(around)) if around.size else z_seed
-    if cfg.seed_repair and abs(z_seed - z_around) > cfg.eps_distance:
-        z_seed = z_around
-    seed_point = z_seed * np.array([xn[u], yn[v], 1.0], dtype=np.float64)
+    xn = (np.arange(W, dtype=np.float32) - np.float32(intrinsics.cx)) / np.float32(intrinsics.fx)
+    yn = (np.arange(H, dtype=np.float32) - np.float32(intrinsics.cy)) / np.float32(intrinsics.fy)
     expected = None
     if expected_normal_cam is not None and cfg.track_normal_deg > 0:
         expected = np.asarray(expected_normal_cam, np.float64)
         expected = expected / np.linalg.norm(expected)
-    n_hat, c_hat = _window_plane(win, seed_point, cfg, expected, expected_point_cam)
-    d_hat = -c_hat  # n̂ · P + D̂ = 0 with n̂ towards the camera
+    try:
+        u, v = seed_pixel(seed_uv, W, H)
+        window = SeedWindow.of(Z, xn, yn, u, v, cfg)
+        # (1) Eq. 11: plane of the seed window.
+        n_hat, c_hat = window_plane(
+            window.points, window.seed_point, cfg, expected, expected_point_cam
+        )
+        crop = PlaneCrop.of(Z, xn, yn, n_hat, -c_hat, window, cfg)
+        idx, grown = grown_region(crop, window, sites_cam, cfg)
+        return _features(idx, grown, crop, n_hat, c_hat, xn, yn, intrinsics, expected, cfg), ""
+    except NoSurface as e:
+        return None, e.reason
 
-    # (2)–(3) Eqs. 12–14, on the crop that can hold the region: the region is one connected
-    # set of Eq. 12 pixels meeting the window (plus a rim), so the bounding box of the Eq. 12
-    # components that meet the window, grown by the rim and the one-pixel stencil of Eq. 14,
-    # gives exactly the same result as the whole image.
-    nx, ny, nz = (np.float32(a) for a in n_hat)
-    dist = Z * ((nx * xn)[None, :] + (ny * yn + nz)[:, None])  # n̂ · P
-    dist += np.float32(d_hat)
-    on_plane = valid & (np.abs(dist) < np.float32(cfg.eps_distance))  # Eq. 12 (with n̂)
-    # Flood fill (mask only) from the window's Eq. 12 pixels, one fill per component.
-    image = on_plane.view(np.uint8)
-    filled = np.zeros((H + 2, W + 2), dtype=np.uint8)
-    flags = cfg.connectivity | cv2.FLOODFILL_MASK_ONLY | (1 << 8)
-    boxes = []
-    window_on_plane = on_plane[v0:v1, u0:u1]
-    window_filled = filled[v0 + 1:v1 + 1, u0 + 1:u1 + 1]  # a view: sees the fills
-    while True:  # one pass per component
-        left = np.flatnonzero(window_on_plane & (window_filled == 0))
-        if len(left) == 0:
-            break
-        y, x = divmod(int(left[0]), u1 - u0)
-        boxes.append(cv2.floodFill(image, filled, (x + u0, y + v0), 1, 0, 0, flags)[3])
-    if not boxes:
-        return None, "no_region_at_seed"
-    grow = cfg.rim + cfg.normal_smoothing if cfg.rim > 0 else 0
-    margin = 1 + grow + cfg.normal_smoothing
-    box = np.array(boxes)  # (x, y, width, height) per component
-    c0 = max(int(box[:, 0].min()) - margin, 0)
-    r0 = max(int(box[:, 1].min()) - margin, 0)
-    c1 = min(int((box[:, 0] + box[:, 2]).max()) + margin, W)
-    r1 = min(int((box[:, 1] + box[:, 3]).max()) + margin, H)
-    crop = (slice(r0, r1), slice(c0, c1))
-    Zc = Z[crop]
-    Xc = Zc * xn[None, c0:c1]
-    Yc = Zc * yn[r0:r1, None]
-    on_plane_c, rules = _rules(Xc, Yc, Zc, valid[crop], xn[c0:c1], yn[r0:r1], n_hat, d_hat, cfg)
 
-    # (4) Region growing: the connected component of the rule pixels at the seed.
-    _, labels = cv2.connectedComponents(rules.view(np.uint8), connectivity=cfg.connectivity)
-    label = int(labels[v - r0, u - c0]) if (r0 <= v < r1 and c0 <= u < c1) else 0
-    sizes = np.bincount(labels.ravel())
-    if label == 0 or (cfg.seed_repair and sizes[label] < cfg.min_pixels):
-        # the seed fails the rules, or its component is no surface (a one-pixel depth outlier
-        # at the seed passes Eq. 13 itself while its four neighbours fail it): the nearest rule
-        # pixel in the window ...
-        a0, a1, b0, b1 = max(v0, r0), min(v1, r1), max(u0, c0), min(u1, c1)
-        wl = labels[a0 - r0:a1 - r0, b0 - c0:b1 - c0]
-        lv, lu = np.nonzero(wl)
-        if len(lv) == 0:
-            return None, "no_region_at_seed"
-        # ... of a component of at least min_pixels when the window meets one
-        big = sizes[wl[lv, lu]] >= cfg.min_pixels
-        if cfg.seed_repair and big.any():
-            lv, lu = lv[big], lu[big]
-        k = int(np.argmin((lv + a0 - v) ** 2 + (lu + b0 - u) ** 2))
-        label = int(wl[lv[k], lu[k]])
-    grown = (labels == label).view(np.uint8)
-
-    # (5) Rim: boundary pixels satisfying Eq. 12 only. A 3 × 3 (8-neighbour) growth whatever
-    # the connectivity: a rectangle's corner pixel touches the rule pixels only diagonally.
-    kernel = np.ones((3, 3), np.uint8)
-    for _ in range(grow):
-        grown = cv2.dilate(grown, kernel) & on_plane_c.view(np.uint8)
-    idx = np.flatnonzero(grown)  # row-major, as region_surface needs
-    pts = np.stack([Xc.ravel()[idx], Yc.ravel()[idx], Zc.ravel()[idx]],
-                   axis=1).astype(np.float64)
-    if sites_cam is not None and len(sites_cam) > 1:
-        keep = split_region(pts, np.asarray(sites_cam, np.float64))
-        idx, pts = idx[keep], pts[keep]
-        grown = np.zeros_like(grown)
-        grown.ravel()[idx] = 1
-    if len(idx) < cfg.min_pixels:
-        return None, "region_too_small"
-    rv, ru = np.divmod(idx, c1 - c0)
-    rv += r0
-    ru += c0
+def _features(
+    idx: np.ndarray,
+    grown: np.ndarray,
+    crop: PlaneCrop,
+    n_hat: np.ndarray,
+    c_hat: float,
+    xn: np.ndarray,
+    yn: np.ndarray,
+    intrinsics: Intrinsics,
+    expected: np.ndarray | None,
+    cfg: DescriptorConfig,
+) -> SurfaceFeatures:
+    """(6) The region's plane and rectangle, (7) the warped perspective."""
+    H, W = intrinsics.height, intrinsics.width
+    rv, ru = np.divmod(idx, crop.c1 - crop.c0)
+    rv += crop.r0
+    ru += crop.c0
     region = np.zeros((H, W), dtype=bool)
-    region[crop] = grown.view(bool)
-
-    # (6) Plane of the region and its rectangle.
+    region[crop.r0 : crop.r1, crop.c0 : crop.c1] = grown.view(bool)
     if cfg.refine:
-        n, c, e1, e2 = fit_plane(pts)
+        n, c, e1, e2 = fit_plane(crop_points(crop, idx))
     else:
         n, c = n_hat, c_hat
         e1 = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
         e1 /= np.linalg.norm(e1)
         e2 = np.cross(n, e1)
-    surface = region_surface(0, ru, rv, xn[ru].astype(np.float64), yn[rv].astype(np.float64),
-                              n, float(c), e1, e2, intrinsics, {})
+    surface = region_surface(
+        0,
+        ru,
+        rv,
+        xn[ru].astype(np.float64),
+        yn[rv].astype(np.float64),
+        n,
+        float(c),
+        e1,
+        e2,
+        intrinsics,
+        {},
+    )
     if surface is None:
-        return None, "edge_on"
+        raise NoSurface("edge_on")
     if expected is not None and abs(float(np.asarray(surface.normal_cam) @ expected)) < np.cos(
-            np.radians(cfg.track_normal_deg)):
-        return None, "surface_changed"
-
-    # (7) Warped perspective.
+        np.radians(cfg.track_normal_deg)
+    ):
+        raise NoSurface("surface_changed")
     _, w_long, w_short = warped_axes(surface)
-    w_long, w_short = (np.array([w[0], w[1], 0.0]) / np.hypot(w[0], w[1])
-                       for w in (w_long, w_short))
+    w_long, w_short = (
+        np.array([w[0], w[1], 0.0]) / np.hypot(w[0], w[1]) for w in (w_long, w_short)
+    )
+    d_hat = -c_hat  # n̂ · P + D̂ = 0 with n̂ towards the camera
     return SurfaceFeatures(
         center_px=np.asarray(surface.center_px, dtype=np.float64),
         center_cam=np.asarray(surface.center_cam, dtype=np.float64),
         normal_cam=np.asarray(surface.normal_cam, dtype=np.float64),
-        long_axis_cam=surface.long_axis_cam, short_axis_cam=surface.short_axis_cam,
-        long_length=surface.long_length, short_length=surface.short_length,
-        warped_long=w_long, warped_short=w_short,
+        long_axis_cam=surface.long_axis_cam,
+        short_axis_cam=surface.short_axis_cam,
+        long_length=surface.long_length,
+        short_length=surface.short_length,
+        warped_long=w_long,
+        warped_short=w_short,
         plane=np.array([n_hat[0], n_hat[1], n_hat[2], d_hat]),
-        num_pixels=int(len(rv)), area=surface.area, region=region,
-    ), ""
+        num_pixels=int(len(rv)),
+        area=surface.area,
+        region=region,
+    )

@@ -37,12 +37,21 @@ def camera_jacobian(robot, q) -> np.ndarray:
     R_in = np.asarray(p.getMatrixFromQuaternion(quat_in)).reshape(3, 3)
     local = (-R_in.T @ p_in).tolist()  # the link frame's origin in centre-of-mass coordinates
     zeros = [0.0] * len(q)
-    lin, ang = p.calculateJacobian(robot.body_id, robot.camera_link, local, q.tolist(), zeros,
-                                   zeros, physicsClientId=robot.client)
+    lin, ang = p.calculateJacobian(
+        robot.body_id,
+        robot.camera_link,
+        local,
+        q.tolist(),
+        zeros,
+        zeros,
+        physicsClientId=robot.client,
+    )
     J_world = np.vstack([np.asarray(lin), np.asarray(ang)])
     if J_world.shape != (6, len(q)):
-        raise RuntimeError(f"unexpected Jacobian shape {J_world.shape} (fixed-base robot with "
-                           f"{len(q)} movable joints expected)")
+        raise RuntimeError(
+            f"unexpected Jacobian shape {J_world.shape} (fixed-base robot with "
+            f"{len(q)} movable joints expected)"
+        )
     R_cw = T_world_cam[:3, :3].T
     return np.vstack([R_cw @ J_world[:3], R_cw @ J_world[3:]])
 
@@ -59,7 +68,7 @@ def joint_velocities(J_cam, twist_cam, damping: float = 1e-3) -> np.ndarray:
     t = np.asarray(twist_cam, dtype=np.float64).reshape(6)
     if J.shape[0] != 6:
         raise ValueError(f"J_cam must be (6, n), got {J.shape}")
-    A = J @ J.T + (damping ** 2) * np.eye(6)
+    A = J @ J.T + (damping**2) * np.eye(6)
     return J.T @ np.linalg.solve(A, t)
 
 

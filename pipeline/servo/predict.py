@@ -17,8 +17,8 @@ Frames: world (z up); camera poses (4, 4) in the OpenCV optical frame; metres, r
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Optional, Sequence
 
 import numpy as np
 
@@ -44,14 +44,24 @@ class ServoMotion:
 
     q: np.ndarray
     poses: list
-    reason: Optional[str]
+    reason: str | None
 
 
-def servo_motion(robot, q_start: np.ndarray, centre_w: np.ndarray, normal_w: np.ndarray,
-                 long_w: np.ndarray, short_w: np.ndarray, pattern: str,
-                 goals: Sequence[ServoConfig], dt: float, max_steps: int,
-                 joint_damping: float, max_joint_speed: float,
-                 reference_x_w: np.ndarray | None = None) -> ServoMotion:
+def servo_motion(
+    robot,
+    q_start: np.ndarray,
+    centre_w: np.ndarray,
+    normal_w: np.ndarray,
+    long_w: np.ndarray,
+    short_w: np.ndarray,
+    pattern: str,
+    goals: Sequence[ServoConfig],
+    dt: float,
+    max_steps: int,
+    joint_damping: float,
+    max_joint_speed: float,
+    reference_x_w: np.ndarray | None = None,
+) -> ServoMotion:
     """The servo from joints ``q_start`` (7,) to the last of ``goals``, on exact features.
 
     Args:
@@ -85,14 +95,14 @@ def servo_motion(robot, q_start: np.ndarray, centre_w: np.ndarray, normal_w: np.
         cmd = servo_velocity(centre, normal, wl, ws, pattern, goals[goal], dt, reference_x=ref)
         if cmd.converged and goal < len(goals) - 1:
             goal += 1
-            cmd = servo_velocity(centre, normal, wl, ws, pattern, goals[goal], dt,
-                                 reference_x=ref)
+            cmd = servo_velocity(centre, normal, wl, ws, pattern, goals[goal], dt, reference_x=ref)
         if cmd.converged:
             return ServoMotion(np.array(qs), poses, None)
         if step == max_steps:
             break
-        qdot = joint_velocities(camera_jacobian(robot, q), np.asarray(cmd.velocity, np.float64),
-                                joint_damping)
+        qdot = joint_velocities(
+            camera_jacobian(robot, q), np.asarray(cmd.velocity, np.float64), joint_damping
+        )
         q, clamped = integrate(robot, q, qdot, dt, max_joint_speed)
         qs.append(q)
         limit_hits = limit_hits + 1 if clamped else 0

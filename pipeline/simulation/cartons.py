@@ -18,8 +18,8 @@ in a random orientation anyway). Metres, kilograms, kg/m³.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
@@ -63,8 +63,9 @@ def check_cartons(cfg) -> None:
             raise ValueError(f"boxes.cartons.{key} = [{lo}, {hi}] must be a range 0 < low <= high")
     for key in ("middle_ratio", "short_ratio"):
         if float(getattr(cfg, key)[1]) > 1:
-            raise ValueError(f"boxes.cartons.{key} must not exceed 1 (edges are drawn long to "
-                             f"short)")
+            raise ValueError(
+                f"boxes.cartons.{key} must not exceed 1 (edges are drawn long to short)"
+            )
     if float(cfg.max_mass) <= 0:
         raise ValueError("boxes.cartons.max_mass must be > 0 kg (the hand's payload)")
     if float(cfg.held_out_margin) < 0:
@@ -96,5 +97,7 @@ def draw_carton(cfg, rng: np.random.Generator) -> Carton:
         if hi < lo_d:
             continue
         return Carton(size=size, mass=float(rng.uniform(lo_d, hi) * volume))
-    raise ValueError(f"boxes.cartons: no carton drawn in {MAX_DRAWS} tries: every draw was "
-                     f"held out, below min_edge or heavier than max_mass; widen the ranges")
+    raise ValueError(
+        f"boxes.cartons: no carton drawn in {MAX_DRAWS} tries: every draw was "
+        f"held out, below min_edge or heavier than max_mass; widen the ranges"
+    )

@@ -56,8 +56,9 @@ def random_quaternion(rng: np.random.Generator) -> np.ndarray:
     return q if q[3] >= 0 else -q
 
 
-_UNIT_CORNERS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)],
-                         np.float64)
+_UNIT_CORNERS = np.array(
+    [[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], np.float64
+)
 
 
 def box_corners(client: int, body_ids: list[int], half_extents: np.ndarray) -> np.ndarray:
@@ -74,12 +75,22 @@ def box_corners(client: int, body_ids: list[int], half_extents: np.ndarray) -> n
 
 def _half_extents(client: int, body_ids: list[int]) -> np.ndarray:
     """(n, 3) half extents of each body's (box) collision shape, metres."""
-    return np.array([p.getCollisionShapeData(b, -1, physicsClientId=client)[0][3]
-                     for b in body_ids], np.float64).reshape(-1, 3) / 2.0
+    return (
+        np.array(
+            [p.getCollisionShapeData(b, -1, physicsClientId=client)[0][3] for b in body_ids],
+            np.float64,
+        ).reshape(-1, 3)
+        / 2.0
+    )
 
 
-def settle(client: int, body_ids: list[int], physics_cfg, max_steps: int,
-           half_extents: np.ndarray | None = None) -> tuple[int, bool]:
+def settle(
+    client: int,
+    body_ids: list[int],
+    physics_cfg,
+    max_steps: int,
+    half_extents: np.ndarray | None = None,
+) -> tuple[int, bool]:
     """Step until the boxes ``body_ids`` are at rest: over the last ``rest_window_steps``, no
     corner of any box has been farther than ``rest_corner_displacement`` from where it is now
     (corners sampled every ``rest_check_interval_steps`` steps; corners, not centres, so that a
@@ -100,8 +111,11 @@ def settle(client: int, body_ids: list[int], physics_cfg, max_steps: int,
     eps2 = float(physics_cfg.rest_corner_displacement) ** 2
     if not body_ids:
         return 0, True
-    half = (_half_extents(client, body_ids) if half_extents is None
-            else np.asarray(half_extents, np.float64).reshape(-1, 3))
+    half = (
+        _half_extents(client, body_ids)
+        if half_extents is None
+        else np.asarray(half_extents, np.float64).reshape(-1, 3)
+    )
     history = [box_corners(client, body_ids, half)]
     steps = 0
     while steps < max_steps:
@@ -112,8 +126,10 @@ def settle(client: int, body_ids: list[int], physics_cfg, max_steps: int,
         history.append(now)
         if len(history) > window + 1:
             history.pop(0)
-        if len(history) == window + 1 and max(
-                float(((past - now) ** 2).sum(-1).max()) for past in history[:-1]) < eps2:
+        if (
+            len(history) == window + 1
+            and max(float(((past - now) ** 2).sum(-1).max()) for past in history[:-1]) < eps2
+        ):
             return steps, True
     return steps, False
 
@@ -139,17 +155,22 @@ def drop_area(bin_cfg, physics_cfg) -> tuple[float, float]:
 def inside_bin(position: np.ndarray, bin_cfg) -> bool:
     """Whether a body's centre ``position`` (world frame, m; the bin floor's top at z = 0) lies
     inside the bin's inner walls, from just below the floor to 0.1 m above the walls' tops."""
-    return (abs(position[0]) < bin_cfg.inner_length_x / 2
-            and abs(position[1]) < bin_cfg.inner_width_y / 2
-            and -0.005 < position[2] < bin_cfg.wall_height + 0.1)
+    return (
+        abs(position[0]) < bin_cfg.inner_length_x / 2
+        and abs(position[1]) < bin_cfg.inner_width_y / 2
+        and -0.005 < position[2] < bin_cfg.wall_height + 0.1
+    )
 
 
 def _box_shapes(client: int, size: np.ndarray) -> tuple[int, int]:
     """(collision shape, visual shape) of a box with edge lengths ``size`` (3,), metres."""
     half = (np.asarray(size, np.float64) / 2).tolist()
-    return (p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client),
-            p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=[0.8, 0.6, 0.4, 1],
-                                physicsClientId=client))
+    return (
+        p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client),
+        p.createVisualShape(
+            p.GEOM_BOX, halfExtents=half, rgbaColor=[0.8, 0.6, 0.4, 1], physicsClientId=client
+        ),
+    )
 
 
 def jittered_size(size: np.ndarray, size_jitter: float, rng: np.random.Generator) -> np.ndarray:
@@ -164,8 +185,15 @@ def jittered_size(size: np.ndarray, size_jitter: float, rng: np.random.Generator
     return size * rng.uniform(1.0 - size_jitter, 1.0 + size_jitter, 3)
 
 
-def drop_heap(client: int, rng: np.random.Generator, boxes_cfg, bin_cfg, physics_cfg,
-              size_jitter: float = 0.0, cartons: bool = False) -> HeapResult:
+def drop_heap(
+    client: int,
+    rng: np.random.Generator,
+    boxes_cfg,
+    bin_cfg,
+    physics_cfg,
+    size_jitter: float = 0.0,
+    cartons: bool = False,
+) -> HeapResult:
     """Drop a random number of random boxes one by one ("trickle"), settle, remove escapees.
 
     Random draws, in this order: the count, then per box its type, x, y and orientation, and,
@@ -175,8 +203,10 @@ def drop_heap(client: int, rng: np.random.Generator, boxes_cfg, bin_cfg, physics
     of the type's; ``size_jitter`` does not apply.
     """
     if cartons and boxes_cfg.cartons is None:
-        raise ValueError("cartons were asked for but boxes.cartons is not set: use boxes=cartons "
-                         "or leave the split out of generate.carton_splits")
+        raise ValueError(
+            "cartons were asked for but boxes.cartons is not set: use boxes=cartons "
+            "or leave the split out of generate.carton_splits"
+        )
     n = int(rng.integers(boxes_cfg.min_count, boxes_cfg.max_count + 1))
     sizes = [np.asarray(t.size, dtype=np.float64) for t in boxes_cfg.types]
     shapes = [_box_shapes(client, size) for size in sizes]
@@ -197,12 +227,21 @@ def drop_heap(client: int, rng: np.random.Generator, boxes_cfg, bin_cfg, physics
             size = jittered_size(sizes[k], size_jitter, rng)
             mass = boxes_cfg.density * float(np.prod(size))
         shape = shapes[k] if not cartons and size_jitter == 0 else _box_shapes(client, size)
-        body = p.createMultiBody(mass, shape[0], shape[1],
-                                 basePosition=[x, y, physics_cfg.drop_height_above_bin_floor],
-                                 baseOrientation=q.tolist(), physicsClientId=client)
-        p.changeDynamics(body, -1, lateralFriction=boxes_cfg.lateral_friction,
-                         frictionAnchor=int(bool(physics_cfg.friction_anchor)),
-                         physicsClientId=client)
+        body = p.createMultiBody(
+            mass,
+            shape[0],
+            shape[1],
+            basePosition=[x, y, physics_cfg.drop_height_above_bin_floor],
+            baseOrientation=q.tolist(),
+            physicsClientId=client,
+        )
+        p.changeDynamics(
+            body,
+            -1,
+            lateralFriction=boxes_cfg.lateral_friction,
+            frictionAnchor=int(bool(physics_cfg.friction_anchor)),
+            physicsClientId=client,
+        )
         bodies.append((body, k))
         body_size[body] = size
         body_mass[body] = float(mass)
@@ -223,15 +262,25 @@ def drop_heap(client: int, rng: np.random.Generator, boxes_cfg, bin_cfg, physics
             removed += 1
     if removed and bodies:
         # Removing a box can unsettle a neighbour leaning on it: settle again.
-        extra, settled_again = settle(client, [b for b, _ in bodies], physics_cfg,
-                                      physics_cfg.max_settle_steps)
+        extra, settled_again = settle(
+            client, [b for b, _ in bodies], physics_cfg, physics_cfg.max_settle_steps
+        )
         steps += extra
         settled = settled and settled_again
 
     out = []
     for body, k in bodies:
         pos, quat = p.getBasePositionAndOrientation(body, physicsClientId=client)
-        out.append(BoxPose(type_index=k, size=body_size[body].copy(), position=np.asarray(pos),
-                           quat_xyzw=np.asarray(quat), body_id=body, mass=body_mass[body]))
-    return HeapResult(boxes=out, num_dropped=n, num_removed=removed, settle_steps=steps,
-                      settled=settled)
+        out.append(
+            BoxPose(
+                type_index=k,
+                size=body_size[body].copy(),
+                position=np.asarray(pos),
+                quat_xyzw=np.asarray(quat),
+                body_id=body,
+                mass=body_mass[body],
+            )
+        )
+    return HeapResult(
+        boxes=out, num_dropped=n, num_removed=removed, settle_steps=steps, settled=settled
+    )

@@ -57,20 +57,23 @@ def object_spec(objects_cfg) -> ObjectSetSpec:
     return from_section(ObjectSetSpec, objects_cfg)
 
 
-def drop_object_heap(client: int, rng: np.random.Generator, objects_cfg, bin_cfg,
-                     physics_cfg) -> ObjectHeap:
+def drop_object_heap(
+    client: int, rng: np.random.Generator, objects_cfg, bin_cfg, physics_cfg
+) -> ObjectHeap:
     """Drop a random number of random objects one by one, settle, remove escapees, settle again.
 
     ``objects_cfg``: the ``objects`` section (``conf/objects/``: the shape spec, ``min_count``,
     ``max_count``, ``density``, ``lateral_friction``); the cell must have been built
-    (``pipeline.cell.bin.build_cell``). Random draws, in this order: the count, then per object its shape
+    (``pipeline.cell.bin.build_cell``). Random draws, in this order: the count, then per object its
+    shape
     (``objects.sample_object``), x, y and orientation.
     """
     spec = object_spec(objects_cfg)
     lo, hi = int(objects_cfg.min_count), int(objects_cfg.max_count)
     if not 0 <= lo <= hi:
-        raise ValueError(f"objects.min_count and max_count must satisfy 0 <= min <= max, got "
-                         f"{lo} and {hi}")
+        raise ValueError(
+            f"objects.min_count and max_count must satisfy 0 <= min <= max, got {lo} and {hi}"
+        )
     n = int(rng.integers(lo, hi + 1))
     hx, hy = drop_area(bin_cfg, physics_cfg)
     bodies: dict[int, ObjectShape] = {}
@@ -79,10 +82,15 @@ def drop_object_heap(client: int, rng: np.random.Generator, objects_cfg, bin_cfg
         shape = sample_object(rng, spec)
         x, y = rng.uniform(-hx, hx), rng.uniform(-hy, hy)
         q = random_quaternion(rng)
-        body = create_body(client, shape, float(objects_cfg.density),
-                           float(objects_cfg.lateral_friction),
-                           [x, y, physics_cfg.drop_height_above_bin_floor], q,
-                           friction_anchor=bool(physics_cfg.friction_anchor))
+        body = create_body(
+            client,
+            shape,
+            float(objects_cfg.density),
+            float(objects_cfg.lateral_friction),
+            [x, y, physics_cfg.drop_height_above_bin_floor],
+            q,
+            friction_anchor=bool(physics_cfg.friction_anchor),
+        )
         bodies[body] = shape
         if i < n - 1:
             for _ in range(physics_cfg.drop_interval_steps):
@@ -93,8 +101,9 @@ def drop_object_heap(client: int, rng: np.random.Generator, objects_cfg, bin_cfg
         return np.array([bodies[b].extents / 2.0 for b in ids]).reshape(-1, 3)
 
     ids = list(bodies)
-    settle_steps, settled = settle(client, ids, physics_cfg, physics_cfg.max_settle_steps,
-                                   half(ids))
+    settle_steps, settled = settle(
+        client, ids, physics_cfg, physics_cfg.max_settle_steps, half(ids)
+    )
     steps += settle_steps
     removed = 0
     for body in ids:
@@ -105,13 +114,15 @@ def drop_object_heap(client: int, rng: np.random.Generator, objects_cfg, bin_cfg
             removed += 1
     if removed and bodies:  # removing one can unsettle a neighbour leaning on it
         ids = list(bodies)
-        extra, settled_again = settle(client, ids, physics_cfg, physics_cfg.max_settle_steps,
-                                      half(ids))
+        extra, settled_again = settle(
+            client, ids, physics_cfg, physics_cfg.max_settle_steps, half(ids)
+        )
         steps += extra
         settled = settled and settled_again
     out = []
     for body, shape in bodies.items():
         pos, quat = p.getBasePositionAndOrientation(body, physicsClientId=client)
         out.append(ObjectPose(shape, np.asarray(pos), np.asarray(quat), body))
-    return ObjectHeap(objects=out, num_dropped=n, num_removed=removed, settle_steps=steps,
-                      settled=settled)
+    return ObjectHeap(
+        objects=out, num_dropped=n, num_removed=removed, settle_steps=steps, settled=settled
+    )

@@ -142,17 +142,22 @@ def _object_shape(family: str, mesh: trimesh.Trimesh) -> ObjectShape:
         vertices = vertices - np.asarray(mesh.center_mass, np.float64)  # rounding only
         mesh = trimesh.Trimesh(vertices, np.asarray(mesh.faces), process=False)
         inertia = np.asarray(mesh.moment_inertia, np.float64)
-    return ObjectShape(family=family, vertices=np.asarray(mesh.vertices, np.float64).copy(),
-                       faces=np.asarray(mesh.faces, np.int64).copy(), volume=float(mesh.volume),
-                       extents=np.asarray(mesh.extents, np.float64).copy(),
-                       inertia=np.diag(inertia).copy())
+    return ObjectShape(
+        family=family,
+        vertices=np.asarray(mesh.vertices, np.float64).copy(),
+        faces=np.asarray(mesh.faces, np.int64).copy(),
+        volume=float(mesh.volume),
+        extents=np.asarray(mesh.extents, np.float64).copy(),
+        inertia=np.diag(inertia).copy(),
+    )
 
 
 def cylinder(radius: float, length: float, sections: int = 64) -> ObjectShape:
     """A cylinder of ``radius`` and ``length`` (m) along the object z axis; its circle is a
     regular polygon of ``sections`` sides inscribed in the circle, with a vertex on +x."""
-    mesh = trimesh.creation.cylinder(radius=float(radius), height=float(length),
-                                     sections=int(sections))
+    mesh = trimesh.creation.cylinder(
+        radius=float(radius), height=float(length), sections=int(sections)
+    )
     return _object_shape("cylinder", mesh)
 
 
@@ -164,8 +169,9 @@ def prism(polygon_xy: np.ndarray, length: float) -> ObjectShape:
     if len(xy) < 3:
         raise ValueError(f"a prism needs a polygon of at least 3 vertices, not {len(xy)}")
     h = float(length) / 2.0
-    points = np.concatenate([np.column_stack([xy, np.full(len(xy), -h)]),
-                             np.column_stack([xy, np.full(len(xy), h)])])
+    points = np.concatenate(
+        [np.column_stack([xy, np.full(len(xy), -h)]), np.column_stack([xy, np.full(len(xy), h)])]
+    )
     return _object_shape("prism", trimesh.convex.convex_hull(points))
 
 
@@ -238,9 +244,17 @@ def sample_object(rng: np.random.Generator, spec: ObjectSetSpec) -> ObjectShape:
     return convex_solid(directions * radii * semi)
 
 
-def create_body(client: int, shape: ObjectShape, density: float, friction: float,
-                position, orientation, *, friction_anchor: bool = False,
-                rgba=(0.8, 0.6, 0.4, 1.0)) -> int:
+def create_body(
+    client: int,
+    shape: ObjectShape,
+    density: float,
+    friction: float,
+    position,
+    orientation,
+    *,
+    friction_anchor: bool = False,
+    rgba=(0.8, 0.6, 0.4, 1.0),
+) -> int:
     """Put ``shape`` into the pybullet simulation ``client`` as a dynamic rigid body.
 
     Mimics ``pipeline.simulation.heap``'s boxes: mass ``density x volume``, lateral friction
@@ -262,19 +276,31 @@ def create_body(client: int, shape: ObjectShape, density: float, friction: float
         The body's unique id. Its base (and inertial) frame is the object frame.
     """
     vertices = np.asarray(shape.vertices, np.float64)
-    col = p.createCollisionShape(p.GEOM_MESH, vertices=vertices.tolist(),
-                                 physicsClientId=client)
-    vis = p.createVisualShape(p.GEOM_MESH, vertices=vertices.tolist(),
-                              indices=np.asarray(shape.faces, np.int64).reshape(-1).tolist(),
-                              rgbaColor=list(rgba), physicsClientId=client)
+    col = p.createCollisionShape(p.GEOM_MESH, vertices=vertices.tolist(), physicsClientId=client)
+    vis = p.createVisualShape(
+        p.GEOM_MESH,
+        vertices=vertices.tolist(),
+        indices=np.asarray(shape.faces, np.int64).reshape(-1).tolist(),
+        rgbaColor=list(rgba),
+        physicsClientId=client,
+    )
     mass = float(density) * float(shape.volume)
-    body = p.createMultiBody(mass, col, vis, basePosition=list(map(float, position)),
-                             baseOrientation=list(map(float, orientation)),
-                             baseInertialFramePosition=[0.0, 0.0, 0.0],
-                             baseInertialFrameOrientation=[0.0, 0.0, 0.0, 1.0],
-                             physicsClientId=client)
-    p.changeDynamics(body, -1, lateralFriction=float(friction),
-                     frictionAnchor=int(bool(friction_anchor)),
-                     localInertiaDiagonal=(float(density) * np.asarray(shape.inertia)).tolist(),
-                     physicsClientId=client)
+    body = p.createMultiBody(
+        mass,
+        col,
+        vis,
+        basePosition=list(map(float, position)),
+        baseOrientation=list(map(float, orientation)),
+        baseInertialFramePosition=[0.0, 0.0, 0.0],
+        baseInertialFrameOrientation=[0.0, 0.0, 0.0, 1.0],
+        physicsClientId=client,
+    )
+    p.changeDynamics(
+        body,
+        -1,
+        lateralFriction=float(friction),
+        frictionAnchor=int(bool(friction_anchor)),
+        localInertiaDiagonal=(float(density) * np.asarray(shape.inertia)).tolist(),
+        physicsClientId=client,
+    )
     return body

@@ -48,8 +48,9 @@ def scene_rng(base_seed: int, split_code: int, index: int) -> np.random.Generato
     return np.random.default_rng([int(base_seed), int(split_code), int(index)])
 
 
-def simulate_scene(client: int, cfg, rng: np.random.Generator,
-                   size_jitter: float = 0.0, cartons: bool = False) -> SimulatedScene:
+def simulate_scene(
+    client: int, cfg, rng: np.random.Generator, size_jitter: float = 0.0, cartons: bool = False
+) -> SimulatedScene:
     """Build the cell, drop a heap, let it rest, render depth and the instance mask.
 
     ``cfg`` needs the sections ``camera``, ``bin``, ``boxes``, ``physics`` and ``sensor``;
@@ -60,10 +61,16 @@ def simulate_scene(client: int, cfg, rng: np.random.Generator,
     heap = drop_heap(client, rng, cfg.boxes, cfg.bin, cfg.physics, size_jitter, cartons)
     intr = Intrinsics.from_config(cfg.camera)
     T_world_cam = camera_pose_above_bin(cfg.camera.height_above_bin_floor)
-    frame = render_depth(client, intr, T_world_cam, cfg.camera.near, cfg.camera.far,
-                         ground=(-cfg.bin.floor_thickness, cell[0]),
-                         renderer=cfg.camera.renderer,
-                         bodies=cell[1:] + [b.body_id for b in heap.boxes])
+    frame = render_depth(
+        client,
+        intr,
+        T_world_cam,
+        cfg.camera.near,
+        cfg.camera.far,
+        ground=(-cfg.bin.floor_thickness, cell[0]),
+        renderer=cfg.camera.renderer,
+        bodies=cell[1:] + [b.body_id for b in heap.boxes],
+    )
     # body id -> instance number (1-based; 0 for everything that is not a kept box)
     lut = np.zeros(int(frame.body_ids.max(initial=-1)) + 2, dtype=np.uint8)
     for k, box in enumerate(heap.boxes, start=1):
@@ -71,10 +78,17 @@ def simulate_scene(client: int, cfg, rng: np.random.Generator,
             lut[box.body_id + 1] = k
     mask = lut[frame.body_ids + 1]
     depth = apply_sensor_model(frame.depth_m, cfg.sensor, rng, intr)
-    return SimulatedScene(depth_m=depth, depth_clean_m=frame.depth_m, mask=mask,
-                          boxes=heap.boxes, T_world_cam=T_world_cam,
-                          num_dropped=heap.num_dropped, num_removed=heap.num_removed,
-                          settle_steps=heap.settle_steps, settled=heap.settled)
+    return SimulatedScene(
+        depth_m=depth,
+        depth_clean_m=frame.depth_m,
+        mask=mask,
+        boxes=heap.boxes,
+        T_world_cam=T_world_cam,
+        num_dropped=heap.num_dropped,
+        num_removed=heap.num_removed,
+        settle_steps=heap.settle_steps,
+        settled=heap.settled,
+    )
 
 
 def box_pose_world(box: BoxPose) -> np.ndarray:

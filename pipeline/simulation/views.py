@@ -12,8 +12,9 @@ from pipeline.camera.geometry import pose_matrix
 from pipeline.simulation.heap import BoxPose
 
 
-def closeup_poses(boxes: list[BoxPose], rng: np.random.Generator,
-                  distances: tuple[float, ...] = (0.15, 0.3)) -> list[np.ndarray]:
+def closeup_poses(
+    boxes: list[BoxPose], rng: np.random.Generator, distances: tuple[float, ...] = (0.15, 0.3)
+) -> list[np.ndarray]:
     """One pose per distance: the camera on the normal of a box face, looking straight at it.
 
     For each distance a box is drawn uniformly from ``boxes``; its face whose outward normal is

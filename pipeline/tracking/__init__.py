@@ -1,8 +1,24 @@
-"""Stage logs written to Rerun (.rrd) and Foxglove MCAP (.mcap) in lock-step, plus read-back helpers.
+"""Stage logs written to Rerun (.rrd) and Foxglove MCAP (.mcap) in lock-step (``stage_log``),
+and reading them back (``readback``)."""
 
-The public names are those of ``pipeline.tracking.stage_log`` (its ``__all__``)."""
+from pipeline.tracking.readback import (
+    mcap_message_counts,
+    rerun_executable,
+    rrd_entity_paths,
+    rrd_equal,
+    rrd_recording_id,
+    rrd_timelines,
+)
+from pipeline.tracking.stage_log import StageLog, default_blueprint, topic_for
 
-from pipeline.tracking import stage_log
-from pipeline.tracking.stage_log import *  # noqa: F401,F403
-
-__all__ = list(stage_log.__all__)
+__all__ = [
+    "StageLog",
+    "default_blueprint",
+    "mcap_message_counts",
+    "rerun_executable",
+    "rrd_entity_paths",
+    "rrd_equal",
+    "rrd_recording_id",
+    "rrd_timelines",
+    "topic_for",
+]

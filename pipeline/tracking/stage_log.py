@@ -32,34 +32,20 @@ Conventions used throughout:
 
 from __future__ import annotations
 
-import json
-import os
-import shutil
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
+import foxglove
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
-import foxglove
 from foxglove import channels as fxc
 from foxglove import messages as fxm
 from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
 from pipeline.camera.geometry import quat_from_matrix
 
-__all__ = [
-    "StageLog",
-    "default_blueprint",
-    "mcap_message_counts",
-    "rrd_entity_paths",
-    "rrd_equal",
-    "rrd_recording_id",
-    "rrd_timelines",
-    "topic_for",
-]
+__all__ = ["StageLog", "default_blueprint", "quat_xyzw_from_matrix", "topic_for"]
 
 RRD_NAME = "log.rrd"
 MCAP_NAME = "log.mcap"
@@ -108,12 +94,13 @@ def _timestamp(clock_ns: int) -> fxm.Timestamp:
     return fxm.Timestamp(sec, nsec)
 
 
-def _quat_xyzw_from_matrix(R: np.ndarray) -> tuple[float, float, float, float]:
+def quat_xyzw_from_matrix(R: np.ndarray) -> tuple[float, float, float, float]:
     """Unit quaternion (x, y, z, w) with w >= 0 of a 3x3 rotation matrix."""
     q = quat_from_matrix(R)
     if q[3] < 0:
         q = -q
     return float(q[0]), float(q[1]), float(q[2]), float(q[3])
+
 
 def _as_colors_u8(colors: np.ndarray, n: int) -> np.ndarray:
     """(N,3)/(N,4) uint8 or float in [0,1] -> (N,4) uint8 RGBA."""
@@ -128,7 +115,7 @@ def _as_colors_u8(colors: np.ndarray, n: int) -> np.ndarray:
 
 
 class StageLog:
-    """Write one pipeline stage's log to ``<folder>/log.rrd`` and ``<folder>/log.mcap`` in lock-step.
+    """Write one stage's log to ``<folder>/log.rrd`` and ``<folder>/log.mcap`` in lock-step.
 
     Parameters
     ----------
@@ -152,11 +139,7 @@ class StageLog:
     """
 
     def __init__(
-        self,
-        folder: Path,
-        app_id: str,
-        recording_id: str,
-        blueprint: "rrb.Blueprint | None" = None,
+        self, folder: Path, app_id: str, recording_id: str, blueprint: rrb.Blueprint | None = None
     ) -> None:
         self.folder = Path(folder)
         self.folder.mkdir(parents=True, exist_ok=True)
@@ -189,7 +172,7 @@ class StageLog:
         self._channels: dict[str, Any] = {}
 
     # ------------------------------------------------------------------ lifecycle
-    def __enter__(self) -> "StageLog":
+    def __enter__(self) -> StageLog:
         return self
 
     def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
@@ -248,19 +231,19 @@ class StageLog:
                 ch = cls(topic, context=self.ctx)
             self._channels[topic] = ch
         elif not isinstance(ch, cls):
-            raise TypeError(f"topic {topic} already carries {type(ch).__name__}, not {cls.__name__}")
+            raise TypeError(
+                f"topic {topic} already carries {type(ch).__name__}, not {cls.__name__}"
+            )
         return ch
 
     def _mcap_log(self, topic: str, cls: Any, msg: Any, log_time: int | None = None) -> None:
-        self._channel(topic, cls).log(msg, log_time=self._clock_ns if log_time is None else log_time)
+        self._channel(topic, cls).log(
+            msg, log_time=self._clock_ns if log_time is None else log_time
+        )
 
     # ------------------------------------------------------------------ camera
     def log_camera(
-        self,
-        entity: str,
-        intrinsics: Any,
-        T_world_cam: np.ndarray,
-        frame_id: str = "camera",
+        self, entity: str, intrinsics: Any, T_world_cam: np.ndarray, frame_id: str = "camera"
     ) -> None:
         """Log a pinhole depth camera's pose and intrinsics.
 
@@ -301,7 +284,7 @@ class StageLog:
         )
 
         ts = _timestamp(self._clock_ns)
-        qx, qy, qz, qw = _quat_xyzw_from_matrix(R)
+        qx, qy, qz, qw = quat_xyzw_from_matrix(R)
         tf = fxm.FrameTransform(
             timestamp=ts,
             parent_frame_id="world",
@@ -384,20 +367,31 @@ class StageLog:
 
     # ------------------------------------------------------------------ geometry
     @staticmethod
-    def _check_boxes(centers: np.ndarray, sizes: np.ndarray, quats_xyzw: np.ndarray,
-                     labels: list[str] | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    def _check_boxes(
+        centers: np.ndarray, sizes: np.ndarray, quats_xyzw: np.ndarray, labels: list[str] | None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
         c = np.asarray(centers, dtype=np.float64).reshape(-1, 3)
         s = np.asarray(sizes, dtype=np.float64).reshape(-1, 3)
         q = np.asarray(quats_xyzw, dtype=np.float64).reshape(-1, 4)
         n = c.shape[0]
         if s.shape[0] != n or q.shape[0] != n:
-            raise ValueError(f"centers, sizes, quats_xyzw disagree on N: {c.shape}, {s.shape}, {q.shape}")
+            raise ValueError(
+                f"centers, sizes, quats_xyzw disagree on N: {c.shape}, {s.shape}, {q.shape}"
+            )
         if labels is not None and len(labels) != n:
             raise ValueError(f"{len(labels)} labels for {n} boxes")
         return c, s, q, n
 
-    def _boxes(self, entity: str, centers: np.ndarray, sizes: np.ndarray, quats_xyzw: np.ndarray,
-               labels: list[str] | None, frame_id: str, static: bool) -> None:
+    def _boxes(
+        self,
+        entity: str,
+        centers: np.ndarray,
+        sizes: np.ndarray,
+        quats_xyzw: np.ndarray,
+        labels: list[str] | None,
+        frame_id: str,
+        static: bool,
+    ) -> None:
         self._check_open()
         c, s, q, n = self._check_boxes(centers, sizes, quats_xyzw, labels)
         # clear_unset: components not given now (e.g. labels) must not linger from a previous
@@ -439,8 +433,12 @@ class StageLog:
                 else None
             ),
         )
-        self._mcap_log(topic_for(entity), fxc.SceneUpdateChannel,
-                       fxm.SceneUpdate(entities=[entity_msg]), log_time=clock)
+        self._mcap_log(
+            topic_for(entity),
+            fxc.SceneUpdateChannel,
+            fxm.SceneUpdate(entities=[entity_msg]),
+            log_time=clock,
+        )
 
     def log_boxes(
         self,
@@ -510,7 +508,9 @@ class StageLog:
             data = p.astype("<f4", copy=False).tobytes()
         else:
             rgba = _as_colors_u8(colors, n)
-            self.rec.log(entity, rr.Points3D.from_fields(clear_unset=True, positions=p, colors=rgba))
+            self.rec.log(
+                entity, rr.Points3D.from_fields(clear_unset=True, positions=p, colors=rgba)
+            )
             stride = 16
             rec = np.zeros(n, dtype=[("xyz", "<f4", (3,)), ("rgba", "u1", (4,))])
             rec["xyz"] = p
@@ -555,7 +555,9 @@ class StageLog:
         except KeyError:
             raise ValueError(f"unknown log level {level!r}; use one of {sorted(_LEVELS)}") from None
         self.rec.log(entity, rr.TextLog(text, level=rr_level))
-        msg = fxm.Log(timestamp=_timestamp(self._clock_ns), level=fx_level, message=text, name=entity)
+        msg = fxm.Log(
+            timestamp=_timestamp(self._clock_ns), level=fx_level, message=text, name=entity
+        )
         self._mcap_log(topic_for(entity), fxc.LogChannel, msg)
 
 
@@ -579,68 +581,3 @@ def default_blueprint(camera_entity: str = "world/camera") -> rrb.Blueprint:
         ),
         collapse_panels=True,
     )
-
-
-# ---------------------------------------------------------------------- read-back helpers
-def rrd_entity_paths(path: Path) -> set[str]:
-    """Entity paths of the first recording in an .rrd file (as Rerun prints them: ``/world/...``)."""
-    from rerun.chunk import RrdReader
-
-    store = RrdReader(path).stream().collect()
-    return {str(c.entity_path) for c in store.stream()}
-
-
-def rrd_timelines(path: Path) -> set[str]:
-    """Names of all timelines used by the first recording in an .rrd file (blueprint excluded).
-
-    A :class:`StageLog` recording holds only the caller's timelines (no ``log_time``)."""
-    from rerun.chunk import RrdReader
-
-    store = RrdReader(path).stream().collect()
-    return {str(t) for c in store.stream() for t in c.timeline_names}
-
-
-def rrd_recording_id(path: Path) -> str:
-    """Recording id of the first recording in an .rrd file."""
-    from rerun.chunk import RrdReader
-
-    recs = RrdReader(path).recordings()
-    if not recs:
-        raise ValueError(f"{path} holds no recording")
-    return str(recs[0].recording_id)
-
-
-def mcap_message_counts(path: Path) -> dict[str, int]:
-    """Topic -> message count, from the MCAP summary statistics (no message decoding)."""
-    from mcap.reader import make_reader
-
-    with open(path, "rb") as f:
-        summary = make_reader(f).get_summary()
-    if summary is None or summary.statistics is None:
-        raise ValueError(f"{path} has no summary statistics")
-    counts: dict[str, int] = {ch.topic: 0 for ch in summary.channels.values()}
-    for cid, n in summary.statistics.channel_message_counts.items():
-        topic = summary.channels[cid].topic
-        counts[topic] = counts.get(topic, 0) + n
-    return counts
-
-
-def rerun_executable() -> str:
-    """The ``rerun`` CLI of this interpreter's environment (next to ``sys.executable``), else PATH."""
-    here = Path(sys.executable).parent / ("rerun.exe" if os.name == "nt" else "rerun")
-    if here.exists():
-        return str(here)
-    found = shutil.which("rerun")
-    if found is None:
-        raise FileNotFoundError("rerun CLI not found next to sys.executable nor on PATH")
-    return found
-
-
-def rrd_equal(a: Path, b: Path) -> bool:
-    """True iff ``rerun rrd compare a b`` exits 0 (same data; the ``log_time`` timeline is ignored)."""
-    res = subprocess.run(
-        [rerun_executable(), "rrd", "compare", str(a), str(b)],
-        capture_output=True,
-        text=True,
-    )
-    return res.returncode == 0

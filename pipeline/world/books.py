@@ -22,17 +22,33 @@ import numpy as np
 from pipeline.world.trial import OUTCOMES, TRIAL_ENDS, TrialResult
 
 CONFIDENCE = 0.95
+# The rate columns of a Table 3 row (``summarise``) that the studies' closed-loop rows copy.
+RATE_KEYS = (
+    "success_rate",
+    "success_ci_low",
+    "success_ci_high",
+    "attempts",
+    "successes",
+    "picked",
+    "boxes",
+    "picked_rate",
+    "picked_ci_low",
+    "picked_ci_high",
+    "pph_motion",
+)
 
 
-def wilson_interval(successes: int, trials: int, confidence: float = CONFIDENCE
-                    ) -> tuple[float, float]:
+def wilson_interval(
+    successes: int, trials: int, confidence: float = CONFIDENCE
+) -> tuple[float, float]:
     """(low, high) Wilson score interval of a binomial proportion; (nan, nan) for 0 trials."""
     if trials <= 0:
         return float("nan"), float("nan")
     from scipy.stats import binomtest
 
-    ci = binomtest(int(successes), int(trials)).proportion_ci(confidence_level=confidence,
-                                                              method="wilson")
+    ci = binomtest(int(successes), int(trials)).proportion_ci(
+        confidence_level=confidence, method="wilson"
+    )
     return float(ci.low), float(ci.high)
 
 
@@ -69,26 +85,35 @@ def summarise(results: list[TrialResult]) -> list[dict]:
         sim_s = sum(r.sim_s for r in rs)
         s_lo, s_hi = wilson_interval(succ, len(atts))
         p_lo, p_hi = wilson_interval(picked, boxes)
-        row = {"planner": name, "trials": len(rs), "boxes": boxes, "picked": picked,
-               "picked_rate": round(picked / boxes, 6) if boxes else float("nan"),
-               "picked_ci_low": round(p_lo, 6), "picked_ci_high": round(p_hi, 6),
-               "attempts": len(atts), "successes": succ,
-               "success_rate": round(succ / len(atts), 6) if atts else float("nan"),
-               "success_ci_low": round(s_lo, 6), "success_ci_high": round(s_hi, 6),
-               "cleared_trials": sum(r.end == "bin_empty" for r in rs),
-               "sim_s": round(sim_s, 3),
-               "pph_motion": round(3600.0 * succ / sim_s, 1) if sim_s > 0 else float("nan"),
-               "wrong_target": sum(a.wrong_target for a in atts),
-               # DCNN attempts on candidates of the fallback tier (evaluate.dcnn_fallback_ratio)
-               "second_tier_attempts": sum(a.second_tier for a in atts),
-               "second_tier_successes": sum(a.second_tier and a.outcome == "success"
-                                            for a in atts)}
+        row = {
+            "planner": name,
+            "trials": len(rs),
+            "boxes": boxes,
+            "picked": picked,
+            "picked_rate": round(picked / boxes, 6) if boxes else float("nan"),
+            "picked_ci_low": round(p_lo, 6),
+            "picked_ci_high": round(p_hi, 6),
+            "attempts": len(atts),
+            "successes": succ,
+            "success_rate": round(succ / len(atts), 6) if atts else float("nan"),
+            "success_ci_low": round(s_lo, 6),
+            "success_ci_high": round(s_hi, 6),
+            "cleared_trials": sum(r.end == "bin_empty" for r in rs),
+            "sim_s": round(sim_s, 3),
+            "pph_motion": round(3600.0 * succ / sim_s, 1) if sim_s > 0 else float("nan"),
+            "wrong_target": sum(a.wrong_target for a in atts),
+            # DCNN attempts on candidates of the fallback tier (evaluate.dcnn_fallback_ratio)
+            "second_tier_attempts": sum(a.second_tier for a in atts),
+            "second_tier_successes": sum(a.second_tier and a.outcome == "success" for a in atts),
+        }
         devs = [a.path_deviation_m for a in atts if a.path_deviation_m is not None]
         # how far the executed servo strayed from the path the run-time check predicted
-        row["path_deviation_mm_median"] = round(1000 * float(np.median(devs)), 2) if devs \
-            else float("nan")
-        row["path_deviation_mm_max"] = round(1000 * float(np.max(devs)), 2) if devs \
-            else float("nan")
+        row["path_deviation_mm_median"] = (
+            round(1000 * float(np.median(devs)), 2) if devs else float("nan")
+        )
+        row["path_deviation_mm_max"] = (
+            round(1000 * float(np.max(devs)), 2) if devs else float("nan")
+        )
         for o in OUTCOMES[1:]:
             row[f"fail_{o}"] = sum(a.outcome == o for a in atts)
         for e in TRIAL_ENDS:
@@ -104,11 +129,17 @@ def convergence_rows(results: list[TrialResult]) -> list[dict]:
     for r in results:
         for s in r.trace:
             e = s["error"]
-            rows.append({"planner": r.planner, "trial": r.trial, "attempt": s["attempt"],
-                         "step": s["step"], "t_s": round(float(s["t"]), 4),
-                         "translation_error": round(float(np.linalg.norm(e[:3])), 6),
-                         "rotation_error_deg": round(float(np.degrees(np.linalg.norm(e[3:]))),
-                                                     4)})
+            rows.append(
+                {
+                    "planner": r.planner,
+                    "trial": r.trial,
+                    "attempt": s["attempt"],
+                    "step": s["step"],
+                    "t_s": round(float(s["t"]), 4),
+                    "translation_error": round(float(np.linalg.norm(e[:3])), 6),
+                    "rotation_error_deg": round(float(np.degrees(np.linalg.norm(e[3:]))), 4),
+                }
+            )
     return rows
 
 
@@ -125,8 +156,7 @@ def drops_by_mass(trials: list[dict], boxes_cfg) -> list[dict]:
     A box type's mass is ``boxes_cfg.density`` × its volume (kg). An attempt that held its box
     (success, or a drop) counts in ``held``: drops / held is how often the pattern, once sealed,
     failed to hold. Rows sorted by planner, then mass, then pattern (L, R, B)."""
-    mass = {str(t.name): float(boxes_cfg.density) * float(np.prod(t.size))
-            for t in boxes_cfg.types}
+    mass = {str(t.name): float(boxes_cfg.density) * float(np.prod(t.size)) for t in boxes_cfg.types}
     counts: dict[tuple, list[int]] = {}
     for tr in trials:
         for a in tr["attempts"]:
@@ -139,10 +169,20 @@ def drops_by_mass(trials: list[dict], boxes_cfg) -> list[dict]:
     order = {"L": 0, "R": 1, "B": 2}
     rows = []
     for (planner, kind, pattern), (held, dropped) in sorted(
-            counts.items(), key=lambda kv: (kv[0][0], mass[kv[0][1]], order.get(kv[0][2], 3))):
+        counts.items(), key=lambda kv: (kv[0][0], mass[kv[0][1]], order.get(kv[0][2], 3))
+    ):
         lo, hi = wilson_interval(dropped, held)
-        rows.append({"planner": planner, "box": kind, "mass_kg": round(mass[kind], 3),
-                     "pattern": pattern, "held": held, "dropped": dropped,
-                     "drop_rate": round(dropped / held, 6) if held else float("nan"),
-                     "drop_ci_low": round(lo, 6), "drop_ci_high": round(hi, 6)})
+        rows.append(
+            {
+                "planner": planner,
+                "box": kind,
+                "mass_kg": round(mass[kind], 3),
+                "pattern": pattern,
+                "held": held,
+                "dropped": dropped,
+                "drop_rate": round(dropped / held, 6) if held else float("nan"),
+                "drop_ci_low": round(lo, 6),
+                "drop_ci_high": round(hi, 6),
+            }
+        )
     return rows

@@ -66,8 +66,11 @@ class PickCell:
         self.boxes = {}
         for b in heap.boxes:
             mass = float(p.getDynamicsInfo(b.body_id, -1, physicsClientId=self.client)[0])
-            self.boxes[b.body_id] = {"mass": mass, "size": np.asarray(b.size, np.float64),
-                                     "type": boxes_cfg.types[b.type_index].name}
+            self.boxes[b.body_id] = {
+                "mass": mass,
+                "size": np.asarray(b.size, np.float64),
+                "type": boxes_cfg.types[b.type_index].name,
+            }
         self.robot.load(self.client, ground_z=-cfg.bin.floor_thickness)
         self.robot.set_joints(self.robot.home_q())
 
@@ -82,21 +85,32 @@ class PickCell:
         T = self.robot.camera_pose() if T_world_cam is None else T_world_cam
         ground = (-self.cfg.bin.floor_thickness, self.cell_ids[0])
         if cam.renderer == "raycast":  # draws the bin and the boxes only: no need to park
-            frame = render_depth(cid, self.intrinsics, T, cam.near, cam.far, ground=ground,
-                                 renderer="raycast", bodies=self.obstacles)
+            frame = render_depth(
+                cid,
+                self.intrinsics,
+                T,
+                cam.near,
+                cam.far,
+                ground=ground,
+                renderer="raycast",
+                bodies=self.obstacles,
+            )
         else:
             pos, orn = p.getBasePositionAndOrientation(rid, physicsClientId=cid)
             p.resetBasePositionAndOrientation(rid, _PARKED, orn, physicsClientId=cid)
             try:
-                frame = render_depth(cid, self.intrinsics, T, cam.near, cam.far, ground=ground,
-                                     renderer=cam.renderer)
+                frame = render_depth(
+                    cid, self.intrinsics, T, cam.near, cam.far, ground=ground, renderer=cam.renderer
+                )
             finally:
                 p.resetBasePositionAndOrientation(rid, pos, orn, physicsClientId=cid)
         depth = frame.depth_m
         if self.cfg.sensor.enabled:  # what the camera returns (pipeline.camera.sensor)
             if self.sensor_rng is None:
-                raise ValueError("PickCell.sensor_rng is not set: a sensor model needs a "
-                                 "generator (PickRunner.run_trial's rng_sensor)")
+                raise ValueError(
+                    "PickCell.sensor_rng is not set: a sensor model needs a "
+                    "generator (PickRunner.run_trial's rng_sensor)"
+                )
             depth = apply_sensor_model(depth, self.cfg.sensor, self.sensor_rng, self.intrinsics)
         return Frame(depth, frame.body_ids, T, frame.depth_m)
 
@@ -106,8 +120,7 @@ class PickCell:
         behind it (body ids, ideal depth) stays here, in ``last_frame``."""
         frame = self.render()
         self.last_frame = frame
-        return Observation(frame.depth_m, self.intrinsics, frame.T_world_cam,
-                           self.robot.joints())
+        return Observation(frame.depth_m, self.intrinsics, frame.T_world_cam, self.robot.joints())
 
     def step(self, seconds: float) -> None:
         """Advance the physics by ``seconds`` (rounded to whole time steps, at least one)."""
@@ -117,8 +130,9 @@ class PickCell:
 
     def settle(self) -> None:
         if self.boxes:
-            settle(self.client, list(self.boxes), self.cfg.physics,
-                   self.cfg.physics.max_settle_steps)
+            settle(
+                self.client, list(self.boxes), self.cfg.physics, self.cfg.physics.max_settle_steps
+            )
 
     def remove_box(self, body: int) -> None:
         p.removeBody(body, physicsClientId=self.client)
@@ -130,8 +144,11 @@ class PickCell:
         inside = []
         for body in list(self.boxes):
             pos, _ = p.getBasePositionAndOrientation(body, physicsClientId=self.client)
-            if abs(pos[0]) < b.inner_length_x / 2 and abs(pos[1]) < b.inner_width_y / 2 \
-                    and pos[2] > -0.05:
+            if (
+                abs(pos[0]) < b.inner_length_x / 2
+                and abs(pos[1]) < b.inner_width_y / 2
+                and pos[2] > -0.05
+            ):
                 inside.append(body)
             else:
                 self.remove_box(body)
@@ -150,6 +167,11 @@ def _with_count(boxes_cfg, count: int):
     """The box set with min_count = max_count = ``count``."""
     from types import SimpleNamespace
 
-    return SimpleNamespace(types=list(boxes_cfg.types), density=float(boxes_cfg.density),
-                           lateral_friction=float(boxes_cfg.lateral_friction),
-                           min_count=int(count), max_count=int(count), name=boxes_cfg.name)
+    return SimpleNamespace(
+        types=list(boxes_cfg.types),
+        density=float(boxes_cfg.density),
+        lateral_friction=float(boxes_cfg.lateral_friction),
+        min_count=int(count),
+        max_count=int(count),
+        name=boxes_cfg.name,
+    )

@@ -49,9 +49,17 @@ def final_home_record(cell: PickCell, obs, cands: list) -> dict:
     "position"} per box in the bin (position: (3,) world frame, metres)."""
     boxes = []
     for body in cell.boxes_in_bin():
-        boxes.append({"body": int(body), "type": str(cell.boxes[body]["type"]),
-                      "position": np.asarray(cell.box_pose(body)[0], np.float64)})
+        boxes.append(
+            {
+                "body": int(body),
+                "type": str(cell.boxes[body]["type"]),
+                "position": np.asarray(cell.box_pose(body)[0], np.float64),
+            }
+        )
     uv = np.array([[float(c.u), float(c.v)] for c in cands], np.float64).reshape(-1, 2)
-    return {"depth_m": np.asarray(obs.depth_m, np.float32),
-            "T_world_cam": np.asarray(obs.T_world_cam, np.float64),
-            "candidates_px": uv, "boxes_left": boxes}
+    return {
+        "depth_m": np.asarray(obs.depth_m, np.float32),
+        "T_world_cam": np.asarray(obs.T_world_cam, np.float64),
+        "candidates_px": uv,
+        "boxes_left": boxes,
+    }

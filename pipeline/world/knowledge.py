@@ -40,12 +40,17 @@ class TruthHeap:
         for body, info in self.cell.boxes.items():
             T = pose_matrix(*self.cell.box_pose(body))
             half = (info["size"] / 2).tolist()
-            shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=half,
-                                           physicsClientId=self.client)
+            shape = p.createCollisionShape(
+                p.GEOM_BOX, halfExtents=half, physicsClientId=self.client
+            )
             self.mirror[body] = p.createMultiBody(
-                0.0, shape, -1, basePosition=T[:3, 3].tolist(),
+                0.0,
+                shape,
+                -1,
+                basePosition=T[:3, 3].tolist(),
                 baseOrientation=quat_from_matrix(T[:3, :3]).tolist(),
-                physicsClientId=self.client)
+                physicsClientId=self.client,
+            )
 
     @contextlib.contextmanager
     def excluding(self, obs: Observation, uv, region):

@@ -18,10 +18,10 @@ from pipeline.camera.geometry import Intrinsics, pose_matrix
 from pipeline.controller.observation import Observation
 from pipeline.controller.planning import Grasp
 from pipeline.dataset.scenes import Box, Scene
-from pipeline.labelling.types import GraspClass
-from pipeline.world.cell import Frame, PickCell
+from pipeline.grasping.types import GraspClass
 from pipeline.planner.decode import GraspPrediction
 from pipeline.planner.ranking import rank_grasps
+from pipeline.world.cell import Frame, PickCell
 
 
 class OraclePlanner:
@@ -46,12 +46,29 @@ class OraclePlanner:
         for k, (body, info) in enumerate(self.cell.boxes.items(), start=1):
             mask[frame.body_ids == body] = k
             T = pose_matrix(*self.cell.box_pose(body))
-            boxes.append(Box(instance=k, type_index=-1, type_name=info["type"],
-                             size=np.asarray(info["size"], np.float64), T_world_box=T,
-                             T_cam_box=T_cam_world @ T))
-        return Scene(depth_m=frame.depth_clean_m, depth_clean_m=frame.depth_clean_m, mask=mask,
-                     boxes=boxes, intrinsics=intr, T_world_cam=frame.T_world_cam, split="",
-                     index=0, seed=(0, 0, 0), settle_steps=0, settled=True)
+            boxes.append(
+                Box(
+                    instance=k,
+                    type_index=-1,
+                    type_name=info["type"],
+                    size=np.asarray(info["size"], np.float64),
+                    T_world_box=T,
+                    T_cam_box=T_cam_world @ T,
+                )
+            )
+        return Scene(
+            depth_m=frame.depth_clean_m,
+            depth_clean_m=frame.depth_clean_m,
+            mask=mask,
+            boxes=boxes,
+            intrinsics=intr,
+            T_world_cam=frame.T_world_cam,
+            split="",
+            index=0,
+            seed=(0, 0, 0),
+            settle_steps=0,
+            settled=True,
+        )
 
     def plan(self, observation: Observation, rng=None) -> list[Grasp]:
         """The labels of the home frame behind ``observation`` as grasps, ranked by Eq. 7."""
@@ -59,21 +76,32 @@ class OraclePlanner:
 
         frame = self.cell.last_frame
         if frame is None or not np.array_equal(frame.T_world_cam, observation.T_world_cam):
-            raise ValueError("the oracle planner plans on the cell's latest observation "
-                             "(PickCell.observe), and this observation is not it")
+            raise ValueError(
+                "the oracle planner plans on the cell's latest observation "
+                "(PickCell.observe), and this observation is not it"
+            )
         intrinsics = observation.intrinsics
         scene = self.scene(frame, intrinsics)
-        rows, _, _, _ = label_scene(scene, self.cfg, self.robot, self.cfg.bin,
-                                    density=float(self.cfg.eval_boxes.density))
+        rows, _, _, _ = label_scene(
+            scene, self.cfg, self.robot, self.cfg.bin, density=float(self.cfg.eval_boxes.density)
+        )
         preds = []
         for uv, cls in zip(rows["uv"], rows["grasp_class"]):
             if int(cls) == int(GraspClass.NG):
                 continue
             probs = np.zeros(len(GraspClass), np.float32)
             probs[int(cls)] = 1.0
-            preds.append(GraspPrediction(u=float(uv[0]), v=float(uv[1]),
-                                         grasp_class=GraspClass(int(cls)), probability=1.0,
-                                         class_probs=probs))
+            preds.append(
+                GraspPrediction(
+                    u=float(uv[0]),
+                    v=float(uv[1]),
+                    grasp_class=GraspClass(int(cls)),
+                    probability=1.0,
+                    class_probs=probs,
+                )
+            )
         ranked = rank_grasps(preds, frame.depth_clean_m, intrinsics, self.ranking)
-        return [Grasp(u=float(c.u), v=float(c.v), pattern=c.grasp_class.name,
-                      score=float(c.score)) for c in ranked]
+        return [
+            Grasp(u=float(c.u), v=float(c.v), pattern=c.grasp_class.name, score=float(c.score))
+            for c in ranked
+        ]

@@ -44,32 +44,7 @@ Seal test (:func:`seal_test`), at the robot's current joint state, nothing is mo
   - ``bin``: the cups seal on one face of a body that is not a box (bin floor, wall, ground);
   - ``ok``: sealed on a box.
 
-Hold test (:func:`hold_test`), the static weight of the box only (contact.py rule 4), extended
-to k = 1 or 2 cups with contact points x_i (the centre rays' hits), approach axis a, weight
-F = m g (``gravity_world`` is the gravity acceleration vector, m/s², e.g. (0, 0, −9.81); the
-gripper reads it from the engine), centre of mass c. The cups act as one contact at the
-centroid x̄ of the x_i:
-
-- ``pull``: f_pull = F . a, normal force f_N = k V − f_pull; fails when f_N < 0.
-- ``shear``: |F − (F . a) a| ≤ mu f_N (one friction cone for the total normal force).
-- ``torsion``: tau = (c − x̄) × F; |tau . a| ≤ mu f_N l_t with l_t = r for one cup and
-  l_t = max(r, cup_offset) for two: the friction couple of the two cups, mu f_N / 2 at
-  ±cup_offset from x̄; each cup's own ring torsion is not added. This is conservative: the
-  exact limit is mu f_N times the mean distance of the rims' points from x̄, which lies between
-  cup_offset and cup_offset + r (0.0356 m vs 0.035 m for the paper's hand), while the simple sum
-  r + cup_offset (0.044 m) would overestimate it.
-- ``bending``: the in-plane part of tau is split into tau_u about the cup line u (x_2 − x_1
-  projected off a) and tau_w about w = a × u. About u the box pivots on the cups' rims: lever
-  r. About w it peels one cup off while pivoting on the outer rim of the other, and the vacuum
-  acts at x̄: lever l_w = r + cup_offset (r for one cup). Holds when
-  (tau_u / (f_N r))² + (tau_w / (f_N l_w))² ≤ 1, evaluated as
-  sqrt((tau_u / r)² + (tau_w / l_w)²) ≤ f_N (no division by f_N). With one cup both levers
-  are r and it is contact.py's |tau_perp| ≤ r f_N.
-
-``HoldResult.margin`` is min over the rules of limit / demand − 1 (inf for a rule with no
-demand), for logging; it is negative when a rule fails. With f_N < 0 it is the pull margin
-k V / f_pull − 1 alone (every other limit is then negative, and contact.py's inequalities
-call those rules failed too, but "pull" comes first).
+Hold test: :func:`pipeline.grasping.suction.hold_test` (the cup model every user shares).
 
 Gripper (:class:`SuctionGripper`): ``try_grasp`` runs the seal test, then the hold test with
 the box's mass (given) and centre of mass (``getBasePositionAndOrientation``: pybullet's base
@@ -90,7 +65,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pybullet as p
 
-from pipeline.dexnet.contact import SuctionModelConfig
+from pipeline.grasping.suction import HoldResult, SuctionModelConfig, hold_test
 
 PATTERN_CUPS = {"L": ("cup_left",), "R": ("cup_right",), "B": ("cup_left", "cup_right")}
 BACKOFF = 0.01  # rays start this far behind the lip, m
@@ -122,22 +97,6 @@ class SealResult:
 
 
 @dataclass
-class HoldResult:
-    """Outcome of :func:`hold_test`.
-
-    Attributes:
-        ok: the seal holds the box's weight.
-        reason: "ok" or the first failing rule: "pull", "shear", "torsion", "bending".
-        margin: min over the rules of limit / demand − 1 (for logging; < 0 when a rule fails,
-            inf when nothing loads the contact).
-    """
-
-    ok: bool
-    reason: str
-    margin: float
-
-
-@dataclass
 class GraspOutcome:
     """Outcome of :meth:`SuctionGripper.try_grasp`.
 
@@ -162,8 +121,9 @@ def _cups(pattern: str) -> tuple[str, ...]:
     try:
         return PATTERN_CUPS[pattern]
     except KeyError:
-        raise ValueError(f"unknown grasp pattern {pattern!r}; expected one of "
-                         f"{sorted(PATTERN_CUPS)}") from None
+        raise ValueError(
+            f"unknown grasp pattern {pattern!r}; expected one of {sorted(PATTERN_CUPS)}"
+        ) from None
 
 
 def _cast_nearest(client: int, starts: np.ndarray, ends: np.ndarray, skip: set[int]):
@@ -184,9 +144,13 @@ def _cast_nearest(client: int, starts: np.ndarray, ends: np.ndarray, skip: set[i
     for level in range(MAX_HITS_PER_RAY):
         if len(active) == 0:
             break
-        res = p.rayTestBatch(starts[active].tolist(), ends[active].tolist(),
-                             reportHitNumber=level, fractionEpsilon=_FRACTION_EPSILON,
-                             physicsClientId=client)
+        res = p.rayTestBatch(
+            starts[active].tolist(),
+            ends[active].tolist(),
+            reportHitNumber=level,
+            fractionEpsilon=_FRACTION_EPSILON,
+            physicsClientId=client,
+        )
         still = []
         for i, r in zip(active, res):
             if r[0] == -1:
@@ -199,9 +163,16 @@ def _cast_nearest(client: int, starts: np.ndarray, ends: np.ndarray, skip: set[i
     return body, frac, point, normal
 
 
-def seal_test(client: int, robot, pattern: str, model_cfg: SuctionModelConfig,
-              box_bodies: Iterable[int], reach: float = 0.02, ignore: Sequence[int] = (),
-              normal_tolerance_deg: float = NORMAL_TOLERANCE_DEG) -> SealResult:
+def seal_test(
+    client: int,
+    robot,
+    pattern: str,
+    model_cfg: SuctionModelConfig,
+    box_bodies: Iterable[int],
+    reach: float = 0.02,
+    ignore: Sequence[int] = (),
+    normal_tolerance_deg: float = NORMAL_TOLERANCE_DEG,
+) -> SealResult:
     """Whether the active cups of ``pattern`` seal where the robot's hand is now.
 
     Args:
@@ -237,10 +208,11 @@ def seal_test(client: int, robot, pattern: str, model_cfg: SuctionModelConfig,
     axis = robot.camera_pose()[:3, 2].copy()
     k = len(cups)
     body, frac, point, normal = _cast_nearest(
-        client, np.concatenate(starts), np.concatenate(ends), {robot.body_id, *ignore})
+        client, np.concatenate(starts), np.concatenate(ends), {robot.body_id, *ignore}
+    )
     body = body.reshape(k, K + 1)
     hit = body >= 0
-    heights = (frac.reshape(k, K + 1) * (BACKOFF + reach) - BACKOFF)  # inf where missed
+    heights = frac.reshape(k, K + 1) * (BACKOFF + reach) - BACKOFF  # inf where missed
     point = point.reshape(k, K + 1, 3)
     normal = normal.reshape(k, K + 1, 3)
     contact_points = point[:, 0, :].copy()
@@ -266,74 +238,6 @@ def seal_test(client: int, robot, pattern: str, model_cfg: SuctionModelConfig,
     return result("ok", on)
 
 
-def _ratio_margin(limit: float, demand: float) -> float:
-    """limit / demand − 1; a rule with no demand (<= 0) has an infinite margin."""
-    if demand <= 1e-15:
-        return math.inf
-    return limit / demand - 1.0
-
-
-def hold_test(mass: float, com_world, contact_points, axis, gravity_world,
-              model_cfg: SuctionModelConfig, cup_offset: float) -> HoldResult:
-    """Whether k (1 or 2) sealed cups hold a box's static weight (module docstring rules).
-
-    Args:
-        mass: the box's mass, kg.
-        com_world: (3,) its centre of mass, m.
-        contact_points: (k, 3) the cups' contact points (under each cup's centre), m.
-        axis: (3,) approach axis, pointing from the cups into the box; normalised here.
-        gravity_world: (3,) gravity acceleration vector, m/s² (the weight is mass × this).
-        model_cfg: vacuum force V per cup, friction mu, cup radius r.
-        cup_offset: distance of each cup from the cups' midpoint, m (0.035 for the paper's
-            hand); only used with two cups.
-
-    Returns:
-        A :class:`HoldResult`.
-    """
-    x = np.atleast_2d(np.asarray(contact_points, dtype=np.float64))
-    k = len(x)
-    if k not in (1, 2) or x.shape[1] != 3:
-        raise ValueError(f"contact_points must be (1, 3) or (2, 3), not {x.shape}")
-    a = np.asarray(axis, dtype=np.float64)
-    a = a / np.linalg.norm(a)
-    F = float(mass) * np.asarray(gravity_world, dtype=np.float64)
-    r, mu = model_cfg.cup_radius, model_cfg.friction
-    vacuum = k * model_cfg.vacuum_force
-
-    f_pull = float(F @ a)
-    f_n = vacuum - f_pull
-    shear = float(np.linalg.norm(F - f_pull * a))
-    tau = np.cross(np.asarray(com_world, dtype=np.float64) - x.mean(axis=0), F)
-    tau_axial = float(tau @ a)
-    tau_perp = tau - tau_axial * a
-    if k == 1:
-        lever_t, lever_w = r, r
-        bend = float(np.linalg.norm(tau_perp)) / r
-    else:
-        u = x[1] - x[0]
-        u = u - (u @ a) * a
-        norm_u = np.linalg.norm(u)
-        if norm_u < 1e-9:
-            raise ValueError("the two contact points coincide across the axis")
-        u /= norm_u
-        w = np.cross(a, u)
-        lever_t, lever_w = max(r, cup_offset), r + cup_offset
-        bend = math.hypot(float(tau_perp @ u) / r, float(tau_perp @ w) / lever_w)
-
-    fails = {
-        "pull": f_n < 0.0,
-        "shear": shear > mu * f_n,
-        "torsion": abs(tau_axial) > lever_t * mu * f_n,
-        "bending": bend > f_n,
-    }
-    margin = _ratio_margin(vacuum, f_pull)
-    if f_n >= 0.0:  # with f_N < 0 the other limits are negative: only the pull margin means much
-        margin = min(margin, _ratio_margin(mu * f_n, shear),
-                     _ratio_margin(lever_t * mu * f_n, abs(tau_axial)), _ratio_margin(f_n, bend))
-    reason = next((name for name, failed in fails.items() if failed), "ok")
-    return HoldResult(reason == "ok", reason, float(margin))
-
-
 class SuctionGripper:
     """Attach / release a box with a fixed constraint whose maxForce stands for the vacuum.
 
@@ -346,8 +250,15 @@ class SuctionGripper:
         gripper.release()
     """
 
-    def __init__(self, client: int, robot, model_cfg: SuctionModelConfig, cup_offset: float,
-                 reach: float = 0.02, gravity_world: Sequence[float] | None = None):
+    def __init__(
+        self,
+        client: int,
+        robot,
+        model_cfg: SuctionModelConfig,
+        cup_offset: float,
+        reach: float = 0.02,
+        gravity_world: Sequence[float] | None = None,
+    ):
         """``gravity_world``: gravity acceleration for the hold test, m/s²; None reads the
         engine's (``getPhysicsEngineParameters``) at each grasp."""
         self.client = client
@@ -369,11 +280,13 @@ class SuctionGripper:
         if self.gravity_world is not None:
             return self.gravity_world
         prm = p.getPhysicsEngineParameters(physicsClientId=self.client)
-        return np.array([prm["gravityAccelerationX"], prm["gravityAccelerationY"],
-                         prm["gravityAccelerationZ"]])
+        return np.array(
+            [prm["gravityAccelerationX"], prm["gravityAccelerationY"], prm["gravityAccelerationZ"]]
+        )
 
-    def try_grasp(self, pattern: str, box_bodies: Mapping[int, float],
-                  ignore: Sequence[int] = ()) -> GraspOutcome:
+    def try_grasp(
+        self, pattern: str, box_bodies: Mapping[int, float], ignore: Sequence[int] = ()
+    ) -> GraspOutcome:
         """Seal test, hold test, and on success attach the box (see the module docstring).
 
         Args:
@@ -385,14 +298,28 @@ class SuctionGripper:
             raise RuntimeError(f"already holding body {self._holding}; release() first")
         cid = self.client
         cups = _cups(pattern)
-        seal = seal_test(cid, self.robot, pattern, self.model_cfg, box_bodies.keys(),
-                         reach=self.reach, ignore=ignore)
+        seal = seal_test(
+            cid,
+            self.robot,
+            pattern,
+            self.model_cfg,
+            box_bodies.keys(),
+            reach=self.reach,
+            ignore=ignore,
+        )
         if not seal.sealed:
             return GraspOutcome(False, False, seal.body, seal.reason, seal)
         body = seal.body
         com, _ = p.getBasePositionAndOrientation(body, physicsClientId=cid)
-        hold = hold_test(box_bodies[body], com, seal.contact_points, seal.axis, self._gravity(),
-                         self.model_cfg, self.cup_offset)
+        hold = hold_test(
+            box_bodies[body],
+            com,
+            seal.contact_points,
+            seal.axis,
+            self._gravity(),
+            self.model_cfg,
+            self.cup_offset,
+        )
         if not hold.ok:
             return GraspOutcome(True, False, body, hold.reason, seal, hold)
 
@@ -403,12 +330,22 @@ class SuctionGripper:
         box_pos, box_orn = p.getBasePositionAndOrientation(body, physicsClientId=cid)
         inv_pos, inv_orn = p.invertTransform(st[0], st[1])
         rel_pos, rel_orn = p.multiplyTransforms(inv_pos, inv_orn, box_pos, box_orn)
-        cons = p.createConstraint(rid, parent, body, -1, p.JOINT_FIXED, [0, 0, 0],
-                                  parentFramePosition=rel_pos, childFramePosition=[0, 0, 0],
-                                  parentFrameOrientation=rel_orn,
-                                  childFrameOrientation=[0, 0, 0, 1], physicsClientId=cid)
-        p.changeConstraint(cons, maxForce=len(cups) * self.model_cfg.vacuum_force,
-                           physicsClientId=cid)
+        cons = p.createConstraint(
+            rid,
+            parent,
+            body,
+            -1,
+            p.JOINT_FIXED,
+            [0, 0, 0],
+            parentFramePosition=rel_pos,
+            childFramePosition=[0, 0, 0],
+            parentFrameOrientation=rel_orn,
+            childFrameOrientation=[0, 0, 0, 1],
+            physicsClientId=cid,
+        )
+        p.changeConstraint(
+            cons, maxForce=len(cups) * self.model_cfg.vacuum_force, physicsClientId=cid
+        )
         self._cup_links = [self.robot.link_index[c] for c in cups]
         for link in self._cup_links:
             p.setCollisionFilterPair(rid, body, link, -1, 0, physicsClientId=cid)

@@ -38,7 +38,6 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 from types import SimpleNamespace
-from typing import Optional
 
 import numpy as np
 import pybullet as p
@@ -46,8 +45,7 @@ import pybullet as p
 from pipeline.world.cell import PickCell
 from pipeline.world.diagnosis import final_home_record, labels_at_no_grasp
 
-OUTCOMES = ("success", "no_seal", "dropped", "collision", "joint_limits", "timeout",
-            "lost_target")
+OUTCOMES = ("success", "no_seal", "dropped", "collision", "joint_limits", "timeout", "lost_target")
 TRIAL_ENDS = ("bin_empty", "no_grasp", "max_failures", "max_attempts")
 # The closed loop's seed streams, per split (``evaluate.split``): the (heap, plan, sensor) keys
 # of the generators (seed, key, trial). dev keeps the keys every earlier evaluation used (the
@@ -83,7 +81,7 @@ class Attempt:
     second_tier: bool = False  # a DCNN candidate of the fallback tier (dcnn_fallback_ratio)
     # m: farthest the executed camera came from the servo path the run-time check predicted
     # (robot.path_check; None without a prediction)
-    path_deviation_m: Optional[float] = None
+    path_deviation_m: float | None = None
 
     @property
     def sim_s(self) -> float:
@@ -122,15 +120,23 @@ class TrialResult:
 def _surface_for_log(feats) -> SimpleNamespace:
     """What the logs draw of the descriptor's surface (centre, axes, normal, lengths; camera
     frame, metres), without its (H, W) region mask: a trial keeps one per control step."""
-    return SimpleNamespace(**{k: np.asarray(getattr(feats, k)).copy() for k in (
-        "center_cam", "normal_cam", "long_axis_cam", "short_axis_cam")},
-        long_length=float(feats.long_length), short_length=float(feats.short_length))
+    return SimpleNamespace(
+        **{
+            k: np.asarray(getattr(feats, k)).copy()
+            for k in ("center_cam", "normal_cam", "long_axis_cam", "short_axis_cam")
+        },
+        long_length=float(feats.long_length),
+        short_length=float(feats.short_length),
+    )
 
 
 def _link_origins(robot) -> np.ndarray:
     """(L, 3) world positions of the robot's link frames (base first), for the logs."""
-    states = p.getLinkStates(robot.body_id, list(range(p.getNumJoints(
-        robot.body_id, physicsClientId=robot.client))), physicsClientId=robot.client)
+    states = p.getLinkStates(
+        robot.body_id,
+        list(range(p.getNumJoints(robot.body_id, physicsClientId=robot.client))),
+        physicsClientId=robot.client,
+    )
     base = p.getBasePositionAndOrientation(robot.body_id, physicsClientId=robot.client)[0]
     return np.array([base] + [s[4] for s in states], np.float64)
 
@@ -140,18 +146,23 @@ class TrialRunner:
     ``pipeline.controller.picker.RobotController`` with one planner)."""
 
     def __init__(self, cfg, cell: PickCell, controller, planner_name: str) -> None:
-        from pipeline.dexnet.contact import suction_model_config
+        from pipeline.grasping.suction import suction_model_config
         from pipeline.world.suction import SuctionGripper
 
         self.cfg, self.cell, self.robot_side, self.name = cfg, cell, controller, planner_name
         self.dt = 1.0 / float(cfg.servo.control_rate_hz)
         self.suction_cfg = suction_model_config(cfg, float(cfg.eval_boxes.density))
-        self.gripper_factory = lambda: SuctionGripper(cell.client, cell.robot, self.suction_cfg,
-                                                      float(cfg.hand.cup_offset))
+        self.gripper_factory = lambda: SuctionGripper(
+            cell.client, cell.robot, self.suction_cfg, float(cfg.hand.cup_offset)
+        )
         self.oracle = None  # the labels' planner of ``diagnosis.labels_at_no_grasp``, when needed
         # wall time of the parts of a control step (seconds, one entry per call)
         self.timings: dict[str, list[float]] = {
-            "control_step_s": [], "render_s": [], "physics_s": [], "collision_s": []}
+            "control_step_s": [],
+            "render_s": [],
+            "physics_s": [],
+            "collision_s": [],
+        }
 
     # ------------------------------------------------------------------ the world's steps
     def observe(self):
@@ -215,11 +226,18 @@ class TrialRunner:
         cell, robot = self.cell, self.cell.robot
         g = plan.grasp
         target = self.target_of(g.u, g.v)
-        att = Attempt(trial=trial, index=index, planner=self.name, pattern=plan.pattern,
-                      g_opt=[float(g.u), float(g.v)], target_body=target,
-                      target_type=cell.boxes[target]["type"] if target >= 0 else "",
-                      planning_s=plan.planning_s, face_split=plan.sites_world is not None,
-                      second_tier=bool(g.second_tier))
+        att = Attempt(
+            trial=trial,
+            index=index,
+            planner=self.name,
+            pattern=plan.pattern,
+            g_opt=[float(g.u), float(g.v)],
+            target_body=target,
+            target_type=cell.boxes[target]["type"] if target >= 0 else "",
+            planning_s=plan.planning_s,
+            face_split=plan.sites_world is not None,
+            second_tier=bool(g.second_tier),
+        )
         servo = self.robot_side.servo(plan)
         executed = [robot.camera_pose()[:3, 3]]
         steps_max = int(np.ceil(float(self.cfg.servo.timeout_s) / self.dt))
@@ -235,15 +253,23 @@ class TrialRunner:
             if step == 0:
                 att.pregrasp_standoff = servo.pregrasp_standoff
             if trace is not None:
-                trace.append({"attempt": index, "step": step, "t": att.servo_s,
-                              "T_world_cam": obs.T_world_cam.copy(),
-                              "links": _link_origins(robot),
-                              "g_opt": np.array([g.u, g.v], np.float64) if step == 0 else None,
-                              "depth": obs.depth_m if step == 0 else None,
-                              "g": s.g_px, "error": np.asarray(s.cmd.error).copy(),
-                              "surface": _surface_for_log(s.feats)})
+                trace.append(
+                    {
+                        "attempt": index,
+                        "step": step,
+                        "t": att.servo_s,
+                        "T_world_cam": obs.T_world_cam.copy(),
+                        "links": _link_origins(robot),
+                        "g_opt": np.array([g.u, g.v], np.float64) if step == 0 else None,
+                        "depth": obs.depth_m if step == 0 else None,
+                        "g": s.g_px,
+                        "error": np.asarray(s.cmd.error).copy(),
+                        "surface": _surface_for_log(s.feats),
+                    }
+                )
             att.final_error = [float(x) for x in np.abs(s.cmd.error[:3])] + [
-                float(np.degrees(np.linalg.norm(s.cmd.error[3:])))]
+                float(np.degrees(np.linalg.norm(s.cmd.error[3:])))
+            ]
             if s.status == "converged":
                 converged = True
                 break
@@ -263,8 +289,11 @@ class TrialRunner:
                 att.outcome, att.collided, att.phase = "collision", contacts, "servo"
                 break
         if plan.predicted is not None:
-            att.path_deviation_m = float(distance_to_path(
-                np.array(executed), np.array([T[:3, 3] for T in plan.predicted])).max())
+            att.path_deviation_m = float(
+                distance_to_path(
+                    np.array(executed), np.array([T[:3, 3] for T in plan.predicted])
+                ).max()
+            )
         if att.outcome:
             return self.go_home(att)
         if not converged:
@@ -278,8 +307,11 @@ class TrialRunner:
         for q in mover.approach(robot.joints()):
             self.execute(q)
             att.motion_s += self.dt
-        hit = [c for c in robot.in_collision(None, self._stop_bodies())
-               if c.other_body != target and not c.robot_link.startswith("cup")]
+        hit = [
+            c
+            for c in robot.in_collision(None, self._stop_bodies())
+            if c.other_body != target and not c.robot_link.startswith("cup")
+        ]
         if hit:
             att.outcome, att.collided, att.phase = "collision", self.describe(hit), "approach"
             return self.go_home(att)
@@ -316,9 +348,14 @@ class TrialRunner:
         return att
 
     # ------------------------------------------------------------------ one trial
-    def run_trial(self, trial: int, rng_heap: np.random.Generator, rng_plan: np.random.Generator,
-                  keep_trace: bool = False,
-                  rng_sensor: np.random.Generator | None = None) -> TrialResult:
+    def run_trial(
+        self,
+        trial: int,
+        rng_heap: np.random.Generator,
+        rng_plan: np.random.Generator,
+        keep_trace: bool = False,
+        rng_sensor: np.random.Generator | None = None,
+    ) -> TrialResult:
         """One trial. ``rng_sensor``: the sensor model's draws (``cfg.sensor``), a stream of its
         own so that the heaps and the plans' draws are the same with and without noise."""
         ev, ctrl = self.cfg.evaluate, self.robot_side
@@ -339,9 +376,12 @@ class TrialRunner:
             result = ctrl.plan(obs, rng_plan)
             if result.plan is None:
                 end = "no_grasp"
-                no_grasp = {"boxes_left": len(self.cell.boxes_in_bin()),
-                            "candidates": len(result.candidates), "checked": result.checked,
-                            "rejected": dict(sorted(result.rejected.items()))}
+                no_grasp = {
+                    "boxes_left": len(self.cell.boxes_in_bin()),
+                    "candidates": len(result.candidates),
+                    "checked": result.checked,
+                    "rejected": dict(sorted(result.rejected.items())),
+                }
                 if self.name != "oracle" and bool(ev.label_no_grasp):
                     no_grasp.update(labels_at_no_grasp(self, obs))
                 if trace is not None:
@@ -359,9 +399,17 @@ class TrialRunner:
             if not self.cell.boxes_in_bin():
                 end = "bin_empty"
         picked = sum(a.outcome == "success" for a in attempts)
-        return TrialResult(trial=trial, planner=self.name, boxes=boxes, picked=picked, end=end,
-                           attempts=attempts, trace=trace or [], no_grasp=no_grasp,
-                           final_home=final_home)
+        return TrialResult(
+            trial=trial,
+            planner=self.name,
+            boxes=boxes,
+            picked=picked,
+            end=end,
+            attempts=attempts,
+            trace=trace or [],
+            no_grasp=no_grasp,
+            final_home=final_home,
+        )
 
 
 def make_runner(cfg, name: str, make_planner) -> TrialRunner:
@@ -379,6 +427,6 @@ def make_runner(cfg, name: str, make_planner) -> TrialRunner:
 
         def knowledge(client):
             return TruthHeap(client, cell)
+
     controller = RobotController(cfg, make_planner(cell), name, knowledge)
     return TrialRunner(cfg, cell, controller, name)
-

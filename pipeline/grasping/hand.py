@@ -33,8 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.config.schema import HandConfig
-from pipeline.labelling.types import GraspClass, Surface
+from pipeline.config.physical import HandConfig
+from pipeline.grasping.types import GraspClass, Surface
 from pipeline.robot.target_pose import target_camera_pose
 
 
@@ -111,8 +111,10 @@ def hand_label(surface: Surface, cfg: HandConfig) -> HandLabel:
     def label(cls, reason=None):
         return HandLabel(cls, x_axis, theta1, theta2, aligned, reason)
 
-    if (cup_fits(half_x, half_y, cfg.cup_offset, cfg)
-            and surface.area >= cfg.min_area_ratio * 2 * cup_area):
+    if (
+        cup_fits(half_x, half_y, cfg.cup_offset, cfg)
+        and surface.area >= cfg.min_area_ratio * 2 * cup_area
+    ):
         return label(GraspClass.B)
     if not (cup_fits(half_x, half_y, 0.0, cfg) and surface.area >= cfg.min_area_ratio * cup_area):
         return label(GraspClass.NG, "too_small")
@@ -122,11 +124,18 @@ def hand_label(surface: Surface, cfg: HandConfig) -> HandLabel:
     return label(GraspClass.L)
 
 
-def camera_centre(surface: Surface, x_axis_cam: np.ndarray, pattern: GraspClass,
-                  cfg: HandConfig) -> np.ndarray:
+def camera_centre(
+    surface: Surface, x_axis_cam: np.ndarray, pattern: GraspClass, cfg: HandConfig
+) -> np.ndarray:
     """O_cam of the pattern's target pose, in the current camera frame (paper Sec. 4.3):
     ``standoff`` along the normal from the centre, shifted so that the pattern's cup is over
     the centre (``pipeline.robot.target_camera_pose``)."""
-    T = target_camera_pose(surface.center_cam, surface.normal_cam, x_axis_cam, pattern,
-                           standoff=cfg.standoff, cup_offset=cfg.cup_offset)
+    T = target_camera_pose(
+        surface.center_cam,
+        surface.normal_cam,
+        x_axis_cam,
+        pattern,
+        standoff=cfg.standoff,
+        cup_offset=cfg.cup_offset,
+    )
     return T[:3, 3]

@@ -6,16 +6,27 @@ import functools
 import importlib
 import os
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from types import ModuleType
-from typing import Callable
 
 from omegaconf import DictConfig, OmegaConf
 
-from pipeline.artifacts.fingerprint import REPO_ROOT
+from pipeline.artifacts.fingerprint import REPO_ROOT, stage_module
 from pipeline.config import register_configs
 
 CONF_DIR = str(REPO_ROOT / "conf")
+# The stages of ``make reproduce``, in its order (the report comes last).
+REPRODUCE_STAGES = (
+    "generate",
+    "label",
+    "train",
+    "baseline",
+    "evaluate",
+    "unseen",
+    "ablation",
+    "robustness",
+)
 
 if not OmegaConf.has_resolver("repo_root"):
     OmegaConf.register_new_resolver("repo_root", lambda: str(REPO_ROOT))
@@ -42,8 +53,11 @@ class MissingLibraryError(ImportError):
 
 # Packages that need a system library pip does not install: the library and how to install it.
 SYSTEM_LIBRARIES = {
-    "open3d": ("libusb-1.0", "`sudo apt-get install libusb-1.0-0` (Debian/Ubuntu), or run "
-                             "`bash scripts/setup.sh` as root"),
+    "open3d": (
+        "libusb-1.0",
+        "`sudo apt-get install libusb-1.0-0` (Debian/Ubuntu), or run "
+        "`bash scripts/setup.sh` as root",
+    )
 }
 
 
@@ -58,11 +72,12 @@ def import_with_fix(name: str) -> ModuleType:
         return importlib.import_module(name)
     except (ImportError, OSError) as e:
         library, fix = SYSTEM_LIBRARIES.get(
-            name, (None, "reinstall the environment: `make setup` (or `bash scripts/setup.sh`)"))
+            name, (None, "reinstall the environment: `make setup` (or `bash scripts/setup.sh`)")
+        )
         needs = f" (it needs the system library {library})" if library else ""
         raise MissingLibraryError(
-            f"cannot import {name}{needs}: {type(e).__name__}: {e}. Fix: {fix}.",
-            name=name) from e
+            f"cannot import {name}{needs}: {type(e).__name__}: {e}. Fix: {fix}.", name=name
+        ) from e
 
 
 def own_overrides(exclude_prefix: str) -> list[str]:
@@ -124,3 +139,18 @@ def compose(config_name: str, overrides: list[str]) -> DictConfig:
             return hydra_compose(config_name=config_name, overrides=overrides)
     finally:
         GlobalHydra.instance().clear()
+
+
+def run_named_stage(stage: str, overrides: list[str], caller: str) -> Path:
+    """Run (or reuse) ``stage_module(stage)`` with these Hydra overrides; its artifact folder.
+
+    ``caller``: the study's name, printed with the command. Raises ``RuntimeError`` when the
+    stage returns no folder (a non-zero torchrun rank)."""
+    fn = getattr(importlib.import_module(stage_module(stage)), stage)
+    print(f"[{caller}] {stage} {' '.join(overrides)}", flush=True)
+    out = fn(compose(stage, list(overrides)))
+    if out is None:
+        raise RuntimeError(
+            f"[{caller}] the {stage} stage returned no artifact (a non-zero torchrun rank?)"
+        )
+    return Path(out)

@@ -1,6 +1,6 @@
 """The closed-loop evaluation stage (paper Secs. 5, 6, Table 3): picking every box out of a bin.
 
-    python -m pipeline.evaluate experiment=smoke [planner=dcnn|dexnet|dexnet_ood|oracle|all]
+    python -m pipeline.stages.evaluate experiment=smoke [planner=dcnn|dexnet|dexnet_ood|oracle|all]
 
 For every planner in ``evaluate.planners`` (``dcnn``: the training artifact
 ``evaluate.train_version``; ``dexnet``: the baseline artifact ``evaluate.baseline_version``,
@@ -58,25 +58,43 @@ from pipeline.artifacts import compute_version, resolve_artifact, run_stage, sta
 from pipeline.artifacts.csvfile import write_rows
 from pipeline.artifacts.store import StageRun
 from pipeline.camera.render import check_renderer
-from pipeline.cli import CONF_DIR, data_root, stage_main
 from pipeline.controller.check import COLLISION_MODELS
 from pipeline.controller.planning import BUILT_IN, load_plugin, plugin_target
 from pipeline.controller.retry import RETRY_POLICIES
-from pipeline.executor import map_shards, resolve_workers
 from pipeline.robot.approach import check_approach
+from pipeline.runtime.cli import CONF_DIR, data_root, stage_main
+from pipeline.runtime.executor import map_shards, resolve_workers
 from pipeline.tracking import StageLog
 from pipeline.world.books import convergence_rows, drops_by_mass, summarise
-from pipeline.world.trial import (
-    HEAP_STREAMS, OUTCOMES, TrialResult, TrialRunner, make_runner,
-)
+from pipeline.world.trial import HEAP_STREAMS, OUTCOMES, TrialResult, TrialRunner, make_runner
 
 STAGE = "evaluate"
 # train.ranking: the oracle ranks with it (the DCNN with its model's, part of the train version)
-SECTIONS = ("seed", "camera", "sensor", "depth_filter", "bin", "physics", "hand", "robot",
-            "suction", "dexnet", "motion", "servo", "eval_boxes", "evaluate", "train.ranking")
-NOT_AFFECTING_RESULT = ("evaluate.train_version", "evaluate.baseline_version",
-                        "evaluate.workers", "evaluate.force", "evaluate.log_trials",
-                        "evaluate.num_threads")
+SECTIONS = (
+    "seed",
+    "camera",
+    "sensor",
+    "depth_filter",
+    "bin",
+    "physics",
+    "hand",
+    "robot",
+    "suction",
+    "dexnet",
+    "motion",
+    "servo",
+    "eval_boxes",
+    "evaluate",
+    "train.ranking",
+)
+NOT_AFFECTING_RESULT = (
+    "evaluate.train_version",
+    "evaluate.baseline_version",
+    "evaluate.workers",
+    "evaluate.force",
+    "evaluate.log_trials",
+    "evaluate.num_threads",
+)
 PLANNERS = BUILT_IN  # and plug-ins (pipeline.controller.planning)
 # The Dex-Net-style planners: the baseline variant each drives the robot with (None: the one
 # ``evaluate.dexnet_variant`` names). ``dexnet_ood``: the GQ-CNN trained on non-box objects.
@@ -87,17 +105,44 @@ def dexnet_variant(cfg, name: str) -> str:
     """The baseline variant (``pipeline.dexnet.planner.BASELINE_VARIANTS``) of Dex-Net-style
     planner ``name``."""
     return DEXNET_PLANNERS[name] or str(cfg.evaluate.dexnet_variant)
+
+
 PAPER_TABLE3 = [  # paper Table 3, as reported
-    {"system": "Dex-Net 3.0", "hand": "suction (1 cup)", "success": 98.0, "planning_s": 3.0,
-     "pph": None},
-    {"system": "Dex-Net 4.0", "hand": "suction (1 cup) + gripper", "success": 97.0,
-     "planning_s": None, "pph": "over 300"},
-    {"system": "Zeng et al.", "hand": "suction + gripper", "success": 58.3, "planning_s": 0.06,
-     "pph": None},
-    {"system": "Le et al.", "hand": "suction (1 cup)", "success": 99.6, "planning_s": 0.862,
-     "pph": None},
-    {"system": "Ours (paper)", "hand": "suction (2 cups)", "success": 97.5, "planning_s": 0.034,
-     "pph": "over 1000"},
+    {
+        "system": "Dex-Net 3.0",
+        "hand": "suction (1 cup)",
+        "success": 98.0,
+        "planning_s": 3.0,
+        "pph": None,
+    },
+    {
+        "system": "Dex-Net 4.0",
+        "hand": "suction (1 cup) + gripper",
+        "success": 97.0,
+        "planning_s": None,
+        "pph": "over 300",
+    },
+    {
+        "system": "Zeng et al.",
+        "hand": "suction + gripper",
+        "success": 58.3,
+        "planning_s": 0.06,
+        "pph": None,
+    },
+    {
+        "system": "Le et al.",
+        "hand": "suction (1 cup)",
+        "success": 99.6,
+        "planning_s": 0.862,
+        "pph": None,
+    },
+    {
+        "system": "Ours (paper)",
+        "hand": "suction (2 cups)",
+        "success": 97.5,
+        "planning_s": 0.034,
+        "pph": "over 1000",
+    },
 ]
 
 
@@ -119,8 +164,9 @@ def _init_worker(cfg_obj, train_dir: str | None, baseline_dir: str | None) -> No
     torch.set_num_threads(int(cfg_obj.evaluate.num_threads))
 
 
-def make_planner(cfg, name: str, train_dir: str | None, baseline_dir: str | None, T_home,
-                 cell=None):
+def make_planner(
+    cfg, name: str, train_dir: str | None, baseline_dir: str | None, T_home, cell=None
+):
     """The ``plan(observation, rng)`` planner (``pipeline.controller.planning``) called
     ``name``: a built-in one, or a plug-in. ``oracle`` reads the world ``cell``'s truth
     (``pipeline.world.oracle``)."""
@@ -140,9 +186,18 @@ def make_planner(cfg, name: str, train_dir: str | None, baseline_dir: str | None
 def _runner(name: str) -> TrialRunner:
     if name not in _STATE["runners"]:
         cfg = _STATE["cfg"]
-        _STATE["runners"][name] = make_runner(cfg, name, lambda cell: make_planner(
-            cfg, name, _STATE["train_dir"], _STATE["baseline_dir"],
-            cell.robot.home_camera_pose(), cell))
+        _STATE["runners"][name] = make_runner(
+            cfg,
+            name,
+            lambda cell: make_planner(
+                cfg,
+                name,
+                _STATE["train_dir"],
+                _STATE["baseline_dir"],
+                cell.robot.home_camera_pose(),
+                cell,
+            ),
+        )
     return _STATE["runners"][name]
 
 
@@ -156,9 +211,13 @@ def run_task(task: TrialTask) -> tuple[TrialResult, dict]:
     keep = task.trial < int(cfg.evaluate.log_trials)
     heap, plan, sensor = HEAP_STREAMS[str(cfg.evaluate.split)]
     t0 = time.perf_counter()
-    result = runner.run_trial(task.trial, np.random.default_rng([seed, heap, task.trial]),
-                              np.random.default_rng([seed, plan, task.trial]), keep,
-                              rng_sensor=np.random.default_rng([seed, sensor, task.trial]))
+    result = runner.run_trial(
+        task.trial,
+        np.random.default_rng([seed, heap, task.trial]),
+        np.random.default_rng([seed, plan, task.trial]),
+        keep,
+        rng_sensor=np.random.default_rng([seed, sensor, task.trial]),
+    )
     wall = time.perf_counter() - t0
     timings = {k: list(v) for k, v in clocks.items()}
     timings["wall_s"] = wall
@@ -166,7 +225,7 @@ def run_task(task: TrialTask) -> tuple[TrialResult, dict]:
 
 
 # ------------------------------------------------------------------------------ logs
-def _log_trials(log: StageLog, results: list[TrialResult], intr) -> None:
+def log_trials(log: StageLog, results: list[TrialResult], intr) -> None:
     """Every logged trial, control step by control step (timeline ``control_step``; the log
     time is simulated time at 30 Hz): the robot's link origins, the camera's pose, g′ and the
     reconstructed surface in the camera frame, the servo errors; per attempt the home depth
@@ -176,50 +235,73 @@ def _log_trials(log: StageLog, results: list[TrialResult], intr) -> None:
 
     from pipeline.camera.geometry import backproject_pixels, quat_from_axes
 
-    half = SimpleNamespace(width=intr.width // 2, height=intr.height // 2, fx=intr.fx / 2,
-                           fy=intr.fy / 2, cx=(intr.cx + 0.5) / 2 - 0.5,
-                           cy=(intr.cy + 0.5) / 2 - 0.5)
+    half = SimpleNamespace(
+        width=intr.width // 2,
+        height=intr.height // 2,
+        fx=intr.fx / 2,
+        fy=intr.fy / 2,
+        cx=(intr.cx + 0.5) / 2 - 0.5,
+        cy=(intr.cy + 0.5) / 2 - 0.5,
+    )
     tick = 0
     for r in results:
         if not r.trace and not r.final_home:
             continue
         prefix = f"trials/{r.planner}/trial_{r.trial}"
         for s in r.trace:
-            log.set_time(sequences={"control_step": tick},
-                         clock_ns=int(round(tick * 1e9 / 30.0)))
+            log.set_time(sequences={"control_step": tick}, clock_ns=int(round(tick * 1e9 / 30.0)))
             tick += 1
-            log.log_points(f"{prefix}/robot/links", s["links"],
-                           np.full((len(s["links"]), 3), 200, np.uint8), frame_id="world")
+            log.log_points(
+                f"{prefix}/robot/links",
+                s["links"],
+                np.full((len(s["links"]), 3), 200, np.uint8),
+                frame_id="world",
+            )
             log.log_camera(f"{prefix}/camera", intr, s["T_world_cam"])
             if s["depth"] is not None:
                 d = s["depth"][::2, ::2]
-                log.log_camera(f"{prefix}/home_camera", half, s["T_world_cam"],
-                               frame_id="home_camera")
+                log.log_camera(
+                    f"{prefix}/home_camera", half, s["T_world_cam"], frame_id="home_camera"
+                )
                 log.log_depth(f"{prefix}/home_camera/depth", d, frame_id="home_camera")
                 u, v = s["g_opt"]
                 z = float(s["depth"][int(round(v)), int(round(u))])
                 g = backproject_pixels(np.array([[u, v]]), np.array([z]), intr)
-                log.log_points(f"{prefix}/home_camera/g_opt", g, np.array([[255, 40, 40]],
-                                                                           np.uint8),
-                               frame_id="home_camera")
+                log.log_points(
+                    f"{prefix}/home_camera/g_opt",
+                    g,
+                    np.array([[255, 40, 40]], np.uint8),
+                    frame_id="home_camera",
+                )
             f = s["surface"]
-            log.log_points(f"{prefix}/camera/g_prime", f.center_cam.reshape(1, 3),
-                           np.array([[255, 220, 0]], np.uint8))
+            log.log_points(
+                f"{prefix}/camera/g_prime",
+                f.center_cam.reshape(1, 3),
+                np.array([[255, 220, 0]], np.uint8),
+            )
             q = quat_from_axes(f.long_axis_cam, f.short_axis_cam, f.normal_cam)
-            log.log_boxes(f"{prefix}/camera/surface", f.center_cam.reshape(1, 3),
-                          np.array([[f.long_length, f.short_length, 0.001]]), q.reshape(1, 4),
-                          labels=[f"attempt {s['attempt']}"], frame_id="camera")
+            log.log_boxes(
+                f"{prefix}/camera/surface",
+                f.center_cam.reshape(1, 3),
+                np.array([[f.long_length, f.short_length, 0.001]]),
+                q.reshape(1, 4),
+                labels=[f"attempt {s['attempt']}"],
+                frame_id="camera",
+            )
             e = s["error"]
             log.log_scalar(f"{prefix}/servo/translation_error", float(np.linalg.norm(e[:3])))
-            log.log_scalar(f"{prefix}/servo/rotation_error_deg",
-                           float(np.degrees(np.linalg.norm(e[3:]))))
+            log.log_scalar(
+                f"{prefix}/servo/rotation_error_deg", float(np.degrees(np.linalg.norm(e[3:])))
+            )
         for a in r.attempts:
-            log.log_text("log", f"{r.planner} trial {r.trial} attempt {a.index}: {a.pattern} at "
-                                f"({a.g_opt[0]:.0f}, {a.g_opt[1]:.0f}) → {a.outcome} "
-                                f"({a.servo_steps} servo steps, {a.sim_s:.2f} s simulated)")
+            log.log_text(
+                "log",
+                f"{r.planner} trial {r.trial} attempt {a.index}: {a.pattern} at "
+                f"({a.g_opt[0]:.0f}, {a.g_opt[1]:.0f}) → {a.outcome} "
+                f"({a.servo_steps} servo steps, {a.sim_s:.2f} s simulated)",
+            )
         if r.final_home:
-            log.set_time(sequences={"control_step": tick},
-                         clock_ns=int(round(tick * 1e9 / 30.0)))
+            log.set_time(sequences={"control_step": tick}, clock_ns=int(round(tick * 1e9 / 30.0)))
             tick += 1
             _log_final_home(log, r, intr, prefix)
 
@@ -236,25 +318,39 @@ def _log_final_home(log: StageLog, r: TrialResult, intr, prefix: str) -> None:
     log.log_depth(f"{prefix}/no_grasp/depth", f["depth_m"], frame_id="no_grasp_camera")
     boxes = f["boxes_left"]
     if boxes:
-        log.log_points(f"{prefix}/no_grasp/boxes_left",
-                       np.array([b["position"] for b in boxes], np.float64),
-                       np.tile(np.array([[255, 140, 0]], np.uint8), (len(boxes), 1)),
-                       frame_id="world")
+        log.log_points(
+            f"{prefix}/no_grasp/boxes_left",
+            np.array([b["position"] for b in boxes], np.float64),
+            np.tile(np.array([[255, 140, 0]], np.uint8), (len(boxes), 1)),
+            frame_id="world",
+        )
     uv = f["candidates_px"]
     if len(uv):
         d = f["depth_m"]
         rows = np.clip(np.round(uv[:, 1]).astype(int), 0, d.shape[0] - 1)
         cols = np.clip(np.round(uv[:, 0]).astype(int), 0, d.shape[1] - 1)
         pts = backproject_pixels(uv, d[rows, cols], intr)
-        log.log_points(f"{prefix}/no_grasp/candidates", pts,
-                       np.tile(np.array([[255, 40, 40]], np.uint8), (len(uv), 1)),
-                       frame_id="no_grasp_camera")
-    left = ", ".join(f"{b['type']} at ({b['position'][0]:+.3f}, {b['position'][1]:+.3f}, "
-                     f"{b['position'][2]:+.3f}) m" for b in boxes) or "none"
+        log.log_points(
+            f"{prefix}/no_grasp/candidates",
+            pts,
+            np.tile(np.array([[255, 40, 40]], np.uint8), (len(uv), 1)),
+            frame_id="no_grasp_camera",
+        )
+    left = (
+        ", ".join(
+            f"{b['type']} at ({b['position'][0]:+.3f}, {b['position'][1]:+.3f}, "
+            f"{b['position'][2]:+.3f}) m"
+            for b in boxes
+        )
+        or "none"
+    )
     ng = r.no_grasp
-    log.log_text("log", f"{r.planner} trial {r.trial} ended no grasp: {ng.get('candidates', 0)} "
-                        f"candidates, rejected {ng.get('rejected', {})}; boxes left: {left}",
-                 level="WARN")
+    log.log_text(
+        "log",
+        f"{r.planner} trial {r.trial} ended no grasp: {ng.get('candidates', 0)} "
+        f"candidates, rejected {ng.get('rejected', {})}; boxes left: {left}",
+        level="WARN",
+    )
 
 
 # ------------------------------------------------------------------------------ the stage
@@ -275,14 +371,14 @@ def _check_choice(what: str, value: str, choices: tuple[str, ...]) -> None:
         raise ValueError(f"{what} {value!r}: choose from {choices}")
 
 
-def evaluate(cfg: DictConfig) -> Path:
-    """Run the closed-loop trials; returns the evaluation artifact folder."""
-    planners = [str(p) for p in cfg.evaluate.planners]
+def _check_config(cfg: DictConfig, planners: list[str]) -> dict[str, str]:
+    """Refuse a bad evaluation config before any trial; the plug-ins' source hashes by name."""
     if len(set(planners)) != len(planners):
         raise ValueError(f"evaluate.planners names a planner twice: {planners}")
     _check_choice("evaluate.split is", str(cfg.evaluate.split), tuple(HEAP_STREAMS))
-    _check_choice("evaluate.collision_model is", str(cfg.evaluate.collision_model),
-                  COLLISION_MODELS)
+    _check_choice(
+        "evaluate.collision_model is", str(cfg.evaluate.collision_model), COLLISION_MODELS
+    )
     plugins = {}
     for name in (n for n in planners if n not in PLANNERS):
         load_plugin(name, cfg)  # a bad plug-in fails here, with its reason, before any trial
@@ -294,30 +390,60 @@ def evaluate(cfg: DictConfig) -> Path:
     for outcome in cfg.evaluate.retry_point_outcomes:
         _check_choice("evaluate.retry_point_outcomes has", str(outcome), OUTCOMES[1:])
     check_approach(str(cfg.motion.approach))
-    upstream, train_dir, baseline_dir = {}, None, None
-    if "dcnn" in planners:
-        train_dir = resolve_artifact(Path(cfg.paths.models), "train", cfg.evaluate.train_version,
-                                     verify=True, key="evaluate.train_version")
-        upstream["train"] = train_dir.name
+    return plugins
+
+
+def _planner_artifacts(cfg: DictConfig, planners: list[str]) -> tuple[Path | None, Path | None]:
+    """(the trained DCNN, the baseline artifact) the planners need, verified; None where none
+    is needed."""
     from pipeline.dexnet.planner import BASELINE_VARIANTS
 
+    train_dir = baseline_dir = None
+    if "dcnn" in planners:
+        train_dir = resolve_artifact(
+            Path(cfg.paths.models),
+            "train",
+            cfg.evaluate.train_version,
+            verify=True,
+            key="evaluate.train_version",
+        )
     if "dexnet" in planners and str(cfg.evaluate.dexnet_variant) not in BASELINE_VARIANTS:
-        raise ValueError(f"evaluate.dexnet_variant={cfg.evaluate.dexnet_variant}: choose from "
-                         f"{', '.join(BASELINE_VARIANTS)}")
+        raise ValueError(
+            f"evaluate.dexnet_variant={cfg.evaluate.dexnet_variant}: choose from "
+            f"{', '.join(BASELINE_VARIANTS)}"
+        )
     for name in (n for n in planners if n in DEXNET_PLANNERS):
         variant = dexnet_variant(cfg, name)
         model_file = BASELINE_VARIANTS[variant][1]
         if model_file is None:  # training-free (planarity)
             continue
         if baseline_dir is None:
-            baseline_dir = resolve_artifact(data_root(cfg), "baseline",
-                                            cfg.evaluate.baseline_version, verify=True,
-                                            key="evaluate.baseline_version")
+            baseline_dir = resolve_artifact(
+                data_root(cfg),
+                "baseline",
+                cfg.evaluate.baseline_version,
+                verify=True,
+                key="evaluate.baseline_version",
+            )
         if not (baseline_dir / model_file).is_file():
-            raise ValueError(f"baseline artifact {baseline_dir.name} has no {model_file} (its "
-                             f"baseline.variants left {variant} out, needed by planner "
-                             f"{name}): run `make baseline` with {variant} in "
-                             "baseline.variants, or pass another evaluate.baseline_version")
+            raise ValueError(
+                f"baseline artifact {baseline_dir.name} has no {model_file} (its "
+                f"baseline.variants left {variant} out, needed by planner "
+                f"{name}): run `make baseline` with {variant} in "
+                "baseline.variants, or pass another evaluate.baseline_version"
+            )
+    return train_dir, baseline_dir
+
+
+def evaluate(cfg: DictConfig) -> Path:
+    """Run the closed-loop trials; returns the evaluation artifact folder."""
+    planners = [str(p) for p in cfg.evaluate.planners]
+    plugins = _check_config(cfg, planners)
+    train_dir, baseline_dir = _planner_artifacts(cfg, planners)
+    upstream = {}
+    if train_dir is not None:
+        upstream["train"] = train_dir.name
+    if baseline_dir is not None:
         upstream["baseline"] = baseline_dir.name
     for name, digest in plugins.items():  # a plug-in's source is part of the version
         upstream[f"plugin:{name}"] = digest
@@ -327,60 +453,94 @@ def evaluate(cfg: DictConfig) -> Path:
     workers = resolve_workers(cfg_obj.evaluate.workers, cfg_obj.executor)
 
     def body(run: StageRun) -> None:
-        tasks = [TrialTask(name, t) for name in planners
-                 for t in range(int(cfg.evaluate.num_trials))]
+        tasks = [
+            TrialTask(name, t) for name in planners for t in range(int(cfg.evaluate.num_trials))
+        ]
         t0 = time.perf_counter()
-        out = list(map_shards(run_task, tasks, init=_init_worker,
-                              initargs=(cfg_obj, str(train_dir) if train_dir else None,
-                                        str(baseline_dir) if baseline_dir else None),
-                              workers=min(workers, len(tasks)), desc=STAGE,
-                              progress=bool(cfg_obj.logging.progress),
-                              executor=cfg_obj.executor))
+        out = list(
+            map_shards(
+                run_task,
+                tasks,
+                init=_init_worker,
+                initargs=(
+                    cfg_obj,
+                    str(train_dir) if train_dir else None,
+                    str(baseline_dir) if baseline_dir else None,
+                ),
+                workers=min(workers, len(tasks)),
+                desc=STAGE,
+                progress=bool(cfg_obj.logging.progress),
+                executor=cfg_obj.executor,
+            )
+        )
         wall = time.perf_counter() - t0
         results = [r for r, _ in out]
-        trials = [{"planner": r.planner, "trial": r.trial, "boxes": r.boxes, "picked": r.picked,
-                   "end": r.end, "sim_s": round(r.sim_s, 4),
-                   **({"no_grasp": r.no_grasp} if r.no_grasp else {}),
-                   "attempts": [{k: v for k, v in dataclasses.asdict(a).items()
-                                 if k != "planning_s"} for a in r.attempts]}
-                  for r in results]
-        (run.work_dir / "trials.json").write_text(json.dumps(trials, indent=1) + "\n")
-        rows = summarise(results)
-        write_rows(run.work_dir / "table3.csv", rows, empty_header=("planner",))
-        drops = drops_by_mass(trials, cfg.eval_boxes)
-        write_rows(run.work_dir / "drops_by_mass.csv", drops, empty_header=("planner",))
-        run.metrics["drops_by_mass"] = drops
-        write_rows(run.work_dir / "servo_convergence.csv", convergence_rows(results),
-                   empty_header=("planner",))
-        run.metrics["table3"] = rows
-        run.metrics["paper_table3"] = PAPER_TABLE3
+        _write_results(run, cfg, results)
         timings: dict = {"wall_s": round(wall, 2), "workers": workers, "planners": {}}
         for name in planners:
-            mine = [(r, t) for r, t in out if r.planner == name]
-            plan = [a.planning_s for r, _ in mine for a in r.attempts]
-            sim = sum(r.sim_s for r, _ in mine)
-            succ = sum(r.picked for r, _ in mine)
-            desc = [x for _, t in mine for x in t["descriptor_s"]]
-            step = [x for _, t in mine for x in t["control_step_s"]]
-            total_plan = sum(r.planning_s for r, _ in mine)
-            walls = [t["wall_s"] for _, t in mine]
-            timings["planners"][name] = {
-                "planning_ms_median": round(1000 * float(np.median(plan)), 2) if plan else None,
-                "planning_ms_mean": round(1000 * float(np.mean(plan)), 2) if plan else None,
-                "pph_with_planning": round(3600.0 * succ / (sim + total_plan), 1)
-                if sim + total_plan > 0 else None,
-                "descriptor_ms_median": round(1000 * float(np.median(desc)), 3) if desc else None,
-                "control_loop_hz": round(1.0 / float(np.median(step)), 2) if step else None,
-                "sim_s_per_wall_s": round(sim / max(sum(walls), 1e-9), 3),
-                "trial_wall_s_mean": round(float(np.mean(walls)), 2) if walls else None}
+            timings["planners"][name] = _planner_timings([m for m in out if m[0].planner == name])
         run.timings.update(timings)
         from pipeline.camera.geometry import Intrinsics
 
         with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version) as log:
-            _log_trials(log, results, Intrinsics.from_config(cfg.camera))
+            log_trials(log, results, Intrinsics.from_config(cfg.camera))
 
-    return run_stage(data_root(cfg), STAGE, version, config, upstream, body,
-                     seed=cfg_obj.seed, force=cfg_obj.evaluate.force)
+    seed, force = cfg_obj.seed, cfg_obj.evaluate.force
+    return run_stage(data_root(cfg), STAGE, version, config, upstream, body, seed=seed, force=force)
+
+
+def _write_results(run: StageRun, cfg: DictConfig, results: list) -> None:
+    """``trials.json`` (every attempt), Table 3, the drops by mass and the servo's convergence."""
+    trials = [
+        {
+            "planner": r.planner,
+            "trial": r.trial,
+            "boxes": r.boxes,
+            "picked": r.picked,
+            "end": r.end,
+            "sim_s": round(r.sim_s, 4),
+            **({"no_grasp": r.no_grasp} if r.no_grasp else {}),
+            "attempts": [
+                {k: v for k, v in dataclasses.asdict(a).items() if k != "planning_s"}
+                for a in r.attempts
+            ],
+        }
+        for r in results
+    ]
+    (run.work_dir / "trials.json").write_text(json.dumps(trials, indent=1) + "\n")
+    rows = summarise(results)
+    write_rows(run.work_dir / "table3.csv", rows, empty_header=("planner",))
+    drops = drops_by_mass(trials, cfg.eval_boxes)
+    write_rows(run.work_dir / "drops_by_mass.csv", drops, empty_header=("planner",))
+    run.metrics["drops_by_mass"] = drops
+    write_rows(
+        run.work_dir / "servo_convergence.csv", convergence_rows(results), empty_header=("planner",)
+    )
+    run.metrics["table3"] = rows
+    run.metrics["paper_table3"] = PAPER_TABLE3
+
+
+def _planner_timings(mine: list) -> dict:
+    """One planner's timings from its (result, timing) pairs: planning time, PPH with planning,
+    the descriptor's time, the control loop's rate, simulated seconds per wall second."""
+    plan = [a.planning_s for r, _ in mine for a in r.attempts]
+    sim = sum(r.sim_s for r, _ in mine)
+    succ = sum(r.picked for r, _ in mine)
+    desc = [x for _, t in mine for x in t["descriptor_s"]]
+    step = [x for _, t in mine for x in t["control_step_s"]]
+    total_plan = sum(r.planning_s for r, _ in mine)
+    walls = [t["wall_s"] for _, t in mine]
+    return {
+        "planning_ms_median": round(1000 * float(np.median(plan)), 2) if plan else None,
+        "planning_ms_mean": round(1000 * float(np.mean(plan)), 2) if plan else None,
+        "pph_with_planning": round(3600.0 * succ / (sim + total_plan), 1)
+        if sim + total_plan > 0
+        else None,
+        "descriptor_ms_median": round(1000 * float(np.median(desc)), 3) if desc else None,
+        "control_loop_hz": round(1.0 / float(np.median(step)), 2) if step else None,
+        "sim_s_per_wall_s": round(sim / max(sum(walls), 1e-9), 3),
+        "trial_wall_s_mean": round(float(np.mean(walls)), 2) if walls else None,
+    }
 
 
 @hydra.main(config_path=CONF_DIR, config_name="evaluate", version_base="1.3")

@@ -23,7 +23,7 @@ attached as a note), so the stage fails and discards its half-written work folde
 with the local executor.
 
 The executor is not part of any artifact version: results are the same under both
-(``tests/test_executor.py``), so ``pipeline.executor`` is plumbing for the source hash too.
+(``tests/test_executor.py``), so ``pipeline.runtime.executor`` is plumbing for the source hash too.
 """
 
 from __future__ import annotations
@@ -33,7 +33,8 @@ import math
 import multiprocessing as mp
 import re
 import sys
-from typing import Any, Callable, Iterator, Sequence, TypeVar
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any, TypeVar
 
 from tqdm import tqdm
 
@@ -42,9 +43,11 @@ R = TypeVar("R")
 
 EXECUTORS = ("local", "ray")
 _ANSI_COLOUR = re.compile(r"\x1b\[[0-9;]*m")
-RAY_INSTALL_HINT = ("executor=ray needs the optional package ray: install it with "
-                    "`pip install -e '.[ray]'` or `bash scripts/setup.sh` (installs "
-                    "requirements.lock), or run with executor=local")
+RAY_INSTALL_HINT = (
+    "executor=ray needs the optional package ray: install it with "
+    "`pip install -e '.[ray]'` or `bash scripts/setup.sh` (installs "
+    "requirements.lock), or run with executor=local"
+)
 
 
 def executor_name(executor: Any) -> str:
@@ -64,7 +67,7 @@ def _get(node: Any, key: str, default: Any = None) -> Any:
 
 def import_ray():
     """The ``ray`` module, or an ImportError that says how to install it."""
-    from pipeline.cli import MissingLibraryError
+    from pipeline.runtime.cli import MissingLibraryError
 
     try:
         import ray
@@ -84,13 +87,18 @@ def start_ray(executor: Any, num_cpus: int) -> bool:
     if ray.is_initialized():
         return False
     address = _get(executor, "address") or None
-    kwargs: dict[str, Any] = dict(include_dashboard=False, configure_logging=False,
-                                  log_to_driver=bool(_get(executor, "log_to_driver", True)))
+    kwargs: dict[str, Any] = dict(
+        include_dashboard=False,
+        configure_logging=False,
+        log_to_driver=bool(_get(executor, "log_to_driver", True)),
+    )
     if address is None:
         # "local": a new instance even where RAY_ADDRESS names a cluster (address is null).
-        kwargs.update(address="local", num_cpus=max(1, int(num_cpus)),
-                      object_store_memory=int(_get(executor, "object_store_memory_mb", 512))
-                      * 1024 * 1024)
+        kwargs.update(
+            address="local",
+            num_cpus=max(1, int(num_cpus)),
+            object_store_memory=int(_get(executor, "object_store_memory_mb", 512)) * 1024 * 1024,
+        )
     else:
         kwargs.update(address=str(address))
     ray.init(**kwargs)
@@ -107,7 +115,7 @@ def _cluster_workers(executor: Any) -> int:
 def resolve_workers(requested: int, executor: Any = None) -> int:
     """The number of workers a stage uses: ``requested`` if positive; otherwise all of the
     cluster's CPUs for ``executor=ray`` with an address, else this machine's cores."""
-    from pipeline.cli import default_workers
+    from pipeline.runtime.cli import default_workers
 
     if requested > 0:
         return int(requested)
@@ -156,8 +164,7 @@ def _reraise_task_error(ray, error: BaseException, fn: Callable) -> None:
         raise error
     # str(error) is Ray's report: the worker process, then the remote traceback.
     report = _ANSI_COLOUR.sub("", str(error)).rstrip()
-    cause.add_note(f"(raised in a Ray worker running {getattr(fn, '__qualname__', fn)}: "
-                   f"{report})")
+    cause.add_note(f"(raised in a Ray worker running {getattr(fn, '__qualname__', fn)}: {report})")
     raise cause from None
 
 
@@ -191,9 +198,18 @@ def _map_ray(fn, tasks, init, initargs, workers, executor, on_result) -> Iterato
             ray.shutdown()
 
 
-def map_shards(fn: Callable[[T], R], tasks: Sequence[T], *, init: Callable[..., None],
-               initargs: tuple, workers: int, desc: str, progress: bool = True,
-               size: Callable[[T], int] = lambda t: t.count, executor: Any = None) -> Iterator[R]:
+def map_shards(
+    fn: Callable[[T], R],
+    tasks: Sequence[T],
+    *,
+    init: Callable[..., None],
+    initargs: tuple,
+    workers: int,
+    desc: str,
+    progress: bool = True,
+    size: Callable[[T], int] = lambda t: t.count,
+    executor: Any = None,
+) -> Iterator[R]:
     """Yield ``fn(task)`` for every task, in task order, on ``workers`` processes.
 
     ``init(*initargs)`` runs once per process before its first task (in this process when
@@ -204,13 +220,19 @@ def map_shards(fn: Callable[[T], R], tasks: Sequence[T], *, init: Callable[..., 
     """
     name = executor_name(executor)
     tasks = list(tasks)
-    bar = tqdm(total=sum(size(t) for t in tasks), unit="scene", desc=desc,
-               disable=not progress, smoothing=0.1)
+    bar = tqdm(
+        total=sum(size(t) for t in tasks),
+        unit="scene",
+        desc=desc,
+        disable=not progress,
+        smoothing=0.1,
+    )
     try:
         if name == "ray":
             if tasks:
-                yield from _map_ray(fn, tasks, init, initargs, workers, executor,
-                                    lambda t: bar.update(size(t)))
+                yield from _map_ray(
+                    fn, tasks, init, initargs, workers, executor, lambda t: bar.update(size(t))
+                )
             return
         if workers <= 1:
             init(*initargs)

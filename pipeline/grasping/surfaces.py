@@ -31,7 +31,7 @@ import cv2
 import numpy as np
 
 from pipeline.camera.geometry import Intrinsics, project
-from pipeline.labelling.types import Surface
+from pipeline.grasping.types import Surface
 
 # RANSAC stops once an all-inlier hypothesis has been drawn with this probability (open3d's
 # default for segment_plane).
@@ -39,8 +39,14 @@ RANSAC_PROBABILITY = 0.99999999
 _RANSAC_CHUNK = 50
 
 # Face names in box-frame axis order, (axis, sign): "+x" is the face whose outward normal is +x.
-FACES = (("+x", 0, 1.0), ("-x", 0, -1.0), ("+y", 1, 1.0), ("-y", 1, -1.0),
-         ("+z", 2, 1.0), ("-z", 2, -1.0))
+FACES = (
+    ("+x", 0, 1.0),
+    ("-x", 0, -1.0),
+    ("+y", 1, 1.0),
+    ("-y", 1, -1.0),
+    ("+z", 2, 1.0),
+    ("-z", 2, -1.0),
+)
 
 
 @dataclass
@@ -126,9 +132,19 @@ def _orient_long_axis(long_axis: np.ndarray) -> np.ndarray:
     return long_axis if long_axis[1] >= 0 else -long_axis
 
 
-def region_surface(instance: int, us: np.ndarray, vs: np.ndarray, xn: np.ndarray,
-                    yn: np.ndarray, normal: np.ndarray, offset: float, e1: np.ndarray,
-                    e2: np.ndarray, intr: Intrinsics, extra: dict) -> Surface | None:
+def region_surface(
+    instance: int,
+    us: np.ndarray,
+    vs: np.ndarray,
+    xn: np.ndarray,
+    yn: np.ndarray,
+    normal: np.ndarray,
+    offset: float,
+    e1: np.ndarray,
+    e2: np.ndarray,
+    intr: Intrinsics,
+    extra: dict,
+) -> Surface | None:
     """The Surface of a pixel region on the plane ``normal · X = offset`` (camera frame).
 
     Args:
@@ -147,8 +163,9 @@ def region_surface(instance: int, us: np.ndarray, vs: np.ndarray, xn: np.ndarray
     # each image row's first and last pixels.
     new_row = np.flatnonzero(vs[1:] != vs[:-1])
     cand = np.concatenate(([0], new_row + 1, new_row, [len(us) - 1]))
-    hull = cv2.convexHull(np.stack([us[cand], vs[cand]], axis=1).astype(np.int32),
-                          returnPoints=False)
+    hull = cv2.convexHull(
+        np.stack([us[cand], vs[cand]], axis=1).astype(np.int32), returnPoints=False
+    )
     h = cand[hull.ravel()]
     z = offset / n_dot_r[h]  # depth of the hull pixels' rays on the plane
     pts = np.stack([xn[h] * z, yn[h] * z, z], axis=1)  # (K, 3)
@@ -176,14 +193,21 @@ def region_surface(instance: int, us: np.ndarray, vs: np.ndarray, xn: np.ndarray
     s = -n_dot_r
     area = float(offset * offset * np.sum(1.0 / (s * s * s)) / (intr.fx * intr.fy))
     return Surface(
-        instance=int(instance), center_cam=centre, normal_cam=np.array(normal, dtype=np.float64),
-        long_axis_cam=long_axis, short_axis_cam=short_axis,
-        long_length=long_len / 1000.0, short_length=short_len / 1000.0,
-        center_px=project(centre, intr), num_points=int(len(us)), area=area, extra=extra,
+        instance=int(instance),
+        center_cam=centre,
+        normal_cam=np.array(normal, dtype=np.float64),
+        long_axis_cam=long_axis,
+        short_axis_cam=short_axis,
+        long_length=long_len / 1000.0,
+        short_length=short_len / 1000.0,
+        center_px=project(centre, intr),
+        num_points=int(len(us)),
+        area=area,
+        extra=extra,
     )
 
 
-class _RegionFinder:
+class RegionFinder:
     """Largest connected region of a subset of one instance's pixels, on the instance's
     bounding box (cheaper than the whole image)."""
 
@@ -199,21 +223,24 @@ class _RegionFinder:
         rows, cols = vs - self.v0, us - self.u0
         img[rows, cols] = 1
         count, labels, stats, _ = cv2.connectedComponentsWithStats(
-            img, connectivity=self.connectivity)
+            img, connectivity=self.connectivity
+        )
         if count <= 2:  # background + one region
             return None, count - 1
         best = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))  # ties: lowest label
         return labels[rows, cols] == best, count - 1
 
 
-def _check_images(depth_m: np.ndarray, mask: np.ndarray, intr: Intrinsics) -> None:
+def check_images(depth_m: np.ndarray, mask: np.ndarray, intr: Intrinsics) -> None:
     shape = (intr.height, intr.width)
     if depth_m.shape != shape or mask.shape != shape:
-        raise ValueError(f"depth {depth_m.shape} and mask {mask.shape} must both be (H, W) = "
-                         f"{shape}, the camera intrinsics' image size")
+        raise ValueError(
+            f"depth {depth_m.shape} and mask {mask.shape} must both be (H, W) = "
+            f"{shape}, the camera intrinsics' image size"
+        )
 
 
-def _instance_pixels(depth_m: np.ndarray, mask: np.ndarray, intr: Intrinsics):
+def instance_pixels(depth_m: np.ndarray, mask: np.ndarray, intr: Intrinsics):
     """For each instance id > 0 with valid depth, in id order, yield ``(instance, us, vs, xn,
     yn, points)``: its pixels in row-major order, their normalised image coordinates
     (u − cx) / fx and (v − cy) / fy, and their (N, 3) camera-frame points."""
@@ -238,8 +265,9 @@ def _instance_pixels(depth_m: np.ndarray, mask: np.ndarray, intr: Intrinsics):
 # Detection
 
 
-def _ransac_numpy(sample: np.ndarray, cfg: SurfaceDetectionConfig,
-                  rng: np.random.Generator) -> tuple[np.ndarray, float] | None:
+def _ransac_numpy(
+    sample: np.ndarray, cfg: SurfaceDetectionConfig, rng: np.random.Generator
+) -> tuple[np.ndarray, float] | None:
     """Best plane (n, c) of up to ``num_iterations`` random ``ransac_n``-point hypotheses on the
     (M, 3) ``sample``: the one with most inliers (the first drawn among equals; the
     least-squares refinement that follows makes equals equivalent).
@@ -257,12 +285,17 @@ def _ransac_numpy(sample: np.ndarray, cfg: SurfaceDetectionConfig,
     local = (sample - origin).T.astype(np.float32)  # (3, M)
     best_count, best = 0, None
     for start in range(0, k, _RANSAC_CHUNK):
-        picks = sample[draws[start:start + _RANSAC_CHUNK]] - origin  # (C, r, 3)
+        picks = sample[draws[start : start + _RANSAC_CHUNK]] - origin  # (C, r, 3)
         if r == 3:
             u, v = picks[:, 1] - picks[:, 0], picks[:, 2] - picks[:, 0]
-            normals = np.stack([u[:, 1] * v[:, 2] - u[:, 2] * v[:, 1],
-                                u[:, 2] * v[:, 0] - u[:, 0] * v[:, 2],
-                                u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]], axis=1)
+            normals = np.stack(
+                [
+                    u[:, 1] * v[:, 2] - u[:, 2] * v[:, 1],
+                    u[:, 2] * v[:, 0] - u[:, 0] * v[:, 2],
+                    u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0],
+                ],
+                axis=1,
+            )
         else:
             centred = picks - picks.mean(axis=1, keepdims=True)
             normals = np.linalg.eigh(np.einsum("kri,krj->kij", centred, centred))[1][:, :, 0]
@@ -271,8 +304,9 @@ def _ransac_numpy(sample: np.ndarray, cfg: SurfaceDetectionConfig,
         if ok.any():
             normals = normals[ok] / length[ok, None]
             offsets = np.einsum("ki,ki->k", normals, picks[ok, 0])  # relative to origin
-            dist = np.abs(normals.astype(np.float32) @ local
-                          - offsets.astype(np.float32)[:, None])  # (C', M)
+            dist = np.abs(
+                normals.astype(np.float32) @ local - offsets.astype(np.float32)[:, None]
+            )  # (C', M)
             counts = np.count_nonzero(dist < cfg.distance_threshold, axis=1)
             j = int(np.argmax(counts))
             if counts[j] > best_count:
@@ -287,17 +321,21 @@ def _ransac_numpy(sample: np.ndarray, cfg: SurfaceDetectionConfig,
     return best
 
 
-def _ransac_open3d(sample: np.ndarray, cfg: SurfaceDetectionConfig,
-                   seed: int) -> tuple[np.ndarray, float] | None:
+def _ransac_open3d(
+    sample: np.ndarray, cfg: SurfaceDetectionConfig, seed: int
+) -> tuple[np.ndarray, float] | None:
     """open3d's ``segment_plane`` on the sample (not reproducible run to run, see the config)."""
-    from pipeline.cli import import_with_fix  # its error says how to install libusb-1.0
+    from pipeline.runtime.cli import import_with_fix  # its error says how to install libusb-1.0
 
     o3d = import_with_fix("open3d")  # imported here: ~1.5 s, and only this backend needs it
 
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(sample))
     o3d.utility.random.seed(seed)
-    model, _ = cloud.segment_plane(distance_threshold=cfg.distance_threshold,
-                                   ransac_n=cfg.ransac_n, num_iterations=cfg.num_iterations)
+    model, _ = cloud.segment_plane(
+        distance_threshold=cfg.distance_threshold,
+        ransac_n=cfg.ransac_n,
+        num_iterations=cfg.num_iterations,
+    )
     n = np.asarray(model[:3], dtype=np.float64)
     scale = float(np.linalg.norm(n))
     if not np.isfinite(scale) or scale == 0:
@@ -350,8 +388,9 @@ def _find_planes(points: np.ndarray, cfg: SurfaceDetectionConfig, instance: int)
         if cfg.ransac_backend == "numpy":
             plane = _ransac_numpy(sample, cfg, rng)
         else:
-            plane = _ransac_open3d(sample, cfg,
-                                   int(cfg.seed) * 1_000_003 + instance * 101 + len(planes))
+            plane = _ransac_open3d(
+                sample, cfg, int(cfg.seed) * 1_000_003 + instance * 101 + len(planes)
+            )
         if plane is None:
             break
         n, c = plane
@@ -377,8 +416,9 @@ def _find_planes(points: np.ndarray, cfg: SurfaceDetectionConfig, instance: int)
     return planes
 
 
-def detect_surfaces(depth_m: np.ndarray, mask: np.ndarray, intrinsics: Intrinsics,
-                    cfg: SurfaceDetectionConfig) -> list[Surface]:
+def detect_surfaces(
+    depth_m: np.ndarray, mask: np.ndarray, intrinsics: Intrinsics, cfg: SurfaceDetectionConfig
+) -> list[Surface]:
     """Planar surfaces of every object in a depth image (paper Figs. 4b–4c).
 
     Segmentation: the points are grouped by the simulator's instance mask, one cluster per box.
@@ -411,12 +451,12 @@ def detect_surfaces(depth_m: np.ndarray, mask: np.ndarray, intrinsics: Intrinsic
         assigned to the plane before keeping the largest region) and ``regions``. Deterministic:
         the same inputs give the same output.
     """
-    _check_images(depth_m, mask, intrinsics)
+    check_images(depth_m, mask, intrinsics)
     if cfg.connectivity not in (4, 8):
         raise ValueError(f"connectivity must be 4 or 8, not {cfg.connectivity}")
     thr = cfg.distance_threshold
     surfaces: list[Surface] = []
-    for instance, us, vs, xn, yn, points in _instance_pixels(depth_m, mask, intrinsics):
+    for instance, us, vs, xn, yn, points in instance_pixels(depth_m, mask, intrinsics):
         if len(us) < cfg.min_inliers:
             continue
         planes = _find_planes(points, cfg, instance)
@@ -427,7 +467,7 @@ def detect_surfaces(depth_m: np.ndarray, mask: np.ndarray, intrinsics: Intrinsic
         residual = np.stack([np.abs(points @ pl.normal - pl.offset) for pl in planes], axis=1)
         nearest = np.argmin(residual, axis=1)  # (N,)
         assigned = residual[np.arange(len(points)), nearest] < thr
-        regions = _RegionFinder(us, vs, cfg.connectivity)
+        regions = RegionFinder(us, vs, cfg.connectivity)
         found = []
         for j, plane in enumerate(planes):
             sel = assigned & (nearest == j)
@@ -441,16 +481,20 @@ def detect_surfaces(depth_m: np.ndarray, mask: np.ndarray, intrinsics: Intrinsic
                 if len(idx) < cfg.min_inliers:
                     continue
             region_points = points.take(idx, axis=0)
-            if (keep is None and plane.axes is not None and plane_pixels == plane.inliers.sum()
-                    and np.array_equal(sel, plane.inliers)):
+            if (
+                keep is None
+                and plane.axes is not None
+                and plane_pixels == plane.inliers.sum()
+                and np.array_equal(sel, plane.inliers)
+            ):
                 # The region is exactly the refinement's inlier set: the same least-squares fit.
                 n, c, (e1, e2) = plane.normal, plane.offset, plane.axes
             else:
                 n, c, e1, e2 = fit_plane(region_points)
             rmse = float(np.sqrt(np.mean((region_points @ n - c) ** 2)))
-            surface = region_surface(instance, us[idx], vs[idx], xn[idx], yn[idx], n, c, e1, e2,
-                                      intrinsics, {"rmse_m": rmse, "plane_pixels": plane_pixels,
-                                                   "regions": num_regions})
+            pixels = (us[idx], vs[idx], xn[idx], yn[idx])
+            extra = {"rmse_m": rmse, "plane_pixels": plane_pixels, "regions": num_regions}
+            surface = region_surface(instance, *pixels, n, c, e1, e2, intrinsics, extra)
             if surface is not None:
                 found.append(surface)
         found.sort(key=lambda s: -s.num_points)
@@ -462,176 +506,5 @@ def detect_surfaces(depth_m: np.ndarray, mask: np.ndarray, intrinsics: Intrinsic
 # Ground truth
 
 
-def true_visible_faces(depth_m: np.ndarray, mask: np.ndarray, intrinsics: Intrinsics, boxes,
-                       min_visible_px: int, tolerance_m: float = 0.002) -> list[Surface]:
-    """The faces of the simulated boxes that the camera sees, as Surfaces.
-
-    A pixel of instance k belongs to face f of ``boxes[k-1]`` if f's outward normal faces the
-    camera, the pixel's back-projected point is within ``tolerance_m`` of f's plane and inside
-    f's rectangle grown by ``tolerance_m``; a pixel that qualifies for two faces (next to an
-    edge) goes to the nearer plane. The face's visible region is its largest connected region
-    (4-connected) of such pixels, and the face counts if that region has at least
-    ``min_visible_px`` pixels. The Surface is computed from the region as in
-    ``detect_surfaces`` but on the exact face plane, so its centre is the centre of the visible
-    part of the true face.
-
-    Args:
-        depth_m, mask, intrinsics: as for ``detect_surfaces``; mask value k is ``boxes[k-1]``.
-        boxes: sequence of objects with ``size`` (3,) edge lengths in metres and ``T_cam_box``
-            (4, 4) pose in the camera frame, e.g. ``pipeline.dataset.scenes.Box``.
-        min_visible_px: fewest pixels in the visible region.
-        tolerance_m: distance to the face plane and margin around the face rectangle.
-
-    Pass noise-free depth (``sensor=ideal``): with sensor noise the tolerance drops pixels
-    and the regions get holes.
-
-    Returns:
-        Surfaces ordered by instance, then by decreasing pixel count. ``extra``: ``face`` ("+x",
-        "-x", ... in the box frame), ``face_pixels`` (all pixels of the face, every region),
-        ``full_face_center_cam`` (3,) and ``full_face_size`` (a, b): edge lengths of the whole
-        face along its two box axes in x, y, z order.
-    """
-    _check_images(depth_m, mask, intrinsics)
-    surfaces: list[Surface] = []
-    for instance, us, vs, xn, yn, points in _instance_pixels(depth_m, mask, intrinsics):
-        if instance > len(boxes):
-            raise ValueError(f"mask has instance {instance} but only {len(boxes)} boxes were "
-                             "given; pass the scene's boxes in instance order")
-        if len(us) < min_visible_px:
-            continue
-        box = boxes[instance - 1]
-        size = np.asarray(box.size, dtype=np.float64)
-        T = np.asarray(box.T_cam_box, dtype=np.float64)
-        R, t = T[:3, :3], T[:3, 3]
-        local = (points - t) @ R  # (N, 3) box frame
-        half = size / 2.0
-        dist = np.full((len(points), len(FACES)), np.inf)
-        for f, (_, axis, sign) in enumerate(FACES):
-            normal = sign * R[:, axis]
-            face_centre = t + sign * half[axis] * R[:, axis]
-            if normal @ face_centre >= 0:  # faces away from the camera (at the origin)
-                continue
-            d = np.abs(sign * local[:, axis] - half[axis])
-            others = [a for a in range(3) if a != axis]
-            inside = np.all(np.abs(local[:, others]) <= half[others] + tolerance_m, axis=1)
-            ok = inside & (d < tolerance_m)
-            dist[ok, f] = d[ok]
-        nearest = np.argmin(dist, axis=1)
-        on_face = np.isfinite(dist[np.arange(len(points)), nearest])
-        regions = _RegionFinder(us, vs, 4)
-        found = []
-        for f, (name, axis, sign) in enumerate(FACES):
-            idx = np.flatnonzero(on_face & (nearest == f))
-            face_pixels = len(idx)
-            if face_pixels < min_visible_px:
-                continue
-            keep, _ = regions.largest(us[idx], vs[idx])
-            if keep is not None:
-                idx = idx[keep]
-                if len(idx) < min_visible_px:
-                    continue
-            normal = sign * R[:, axis]
-            face_centre = t + sign * half[axis] * R[:, axis]
-            a, b = [k for k in range(3) if k != axis]
-            surface = region_surface(
-                instance, us[idx], vs[idx], xn[idx], yn[idx], normal, float(normal @ face_centre),
-                R[:, a], R[:, b], intrinsics,
-                {"face": name, "face_pixels": face_pixels, "full_face_center_cam": face_centre,
-                 "full_face_size": (float(size[a]), float(size[b]))},
-            )
-            if surface is not None:
-                found.append(surface)
-        found.sort(key=lambda s: -s.num_points)
-        surfaces.extend(found)
-    return surfaces
-
-
 # --------------------------------------------------------------------------------------------
 # Scoring
-
-
-def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
-    return float(np.degrees(np.arccos(np.clip(np.dot(a, b), -1.0, 1.0))))
-
-
-def _stats(values: list[float], prefix: str) -> dict:
-    """Median and 90th percentile of ``values`` (None when empty), keys ``<prefix>_median/p90``."""
-    if not values:
-        return {f"{prefix}_median": None, f"{prefix}_p90": None}
-    arr = np.asarray(values, dtype=np.float64)
-    return {f"{prefix}_median": float(np.median(arr)),
-            f"{prefix}_p90": float(np.percentile(arr, 90))}
-
-
-def _summary(pairs: list[dict], found: int, missed: int, spurious: int) -> dict:
-    out = {"found": found, "missed": missed, "spurious": spurious,
-           "recall": found / (found + missed) if found + missed else None,
-           "precision": found / (found + spurious) if found + spurious else None}
-    out.update(_stats([p["center_err_px"] for p in pairs], "center_err_px"))
-    out.update(_stats([p["center_err_mm"] for p in pairs], "center_err_mm"))
-    out.update(_stats([p["normal_err_deg"] for p in pairs], "normal_err_deg"))
-    return out
-
-
-def match_surfaces(detected: list[Surface], truth: list[Surface], max_center_dist_m: float = 0.02,
-                   max_normal_deg: float = 20.0) -> dict:
-    """Greedy one-to-one matching of detected to true surfaces of the same instance.
-
-    Candidate pairs have the same instance, centres within ``max_center_dist_m`` and normals
-    within ``max_normal_deg``; they are taken in order of increasing centre distance, each
-    surface at most once.
-
-    Returns:
-        A JSON-serialisable dict: ``found``, ``missed`` (true surfaces left unmatched),
-        ``spurious`` (detected ones left unmatched), ``recall``, ``precision``, median and p90 of
-        ``center_err_px`` (image distance of ``center_px``), ``center_err_mm`` (3-D) and
-        ``normal_err_deg``, plus ``pairs`` (one record per match: instance, detected / true
-        index, the three errors, true and detected pixel counts, the true face name),
-        ``missed_truth`` and ``spurious_detected`` (instance, index, num_points[, face]).
-        Statistics of an empty set are None.
-    """
-    candidates = []
-    for i, d in enumerate(detected):
-        for j, t in enumerate(truth):
-            if d.instance != t.instance:
-                continue
-            dist = float(np.linalg.norm(d.center_cam - t.center_cam))
-            angle = _angle_deg(d.normal_cam, t.normal_cam)
-            if dist <= max_center_dist_m and angle <= max_normal_deg:
-                candidates.append((dist, i, j, angle))
-    candidates.sort()
-    used_d, used_t, pairs = set(), set(), []
-    for dist, i, j, angle in candidates:
-        if i in used_d or j in used_t:
-            continue
-        used_d.add(i)
-        used_t.add(j)
-        d, t = detected[i], truth[j]
-        pairs.append({
-            "instance": int(t.instance), "detected": i, "truth": j,
-            "face": t.extra.get("face"),
-            "center_err_px": float(np.linalg.norm(np.asarray(d.center_px, float)
-                                                  - np.asarray(t.center_px, float))),
-            "center_err_mm": dist * 1000.0, "normal_err_deg": angle,
-            "truth_points": int(t.num_points), "detected_points": int(d.num_points),
-        })
-    missed = [{"instance": int(t.instance), "truth": j, "num_points": int(t.num_points),
-               "face": t.extra.get("face")} for j, t in enumerate(truth) if j not in used_t]
-    spurious = [{"instance": int(d.instance), "detected": i, "num_points": int(d.num_points)}
-                for i, d in enumerate(detected) if i not in used_d]
-    out = _summary(pairs, len(pairs), len(missed), len(spurious))
-    out.update({"pairs": pairs, "missed_truth": missed, "spurious_detected": spurious})
-    return out
-
-
-def aggregate(matches: list[dict]) -> dict:
-    """Totals and error statistics over many ``match_surfaces`` results (a whole dataset).
-
-    Returns the same summary keys as ``match_surfaces`` (without the per-record lists) plus
-    ``images``; plain ints / floats / None, JSON-serialisable.
-    """
-    pairs = [p for m in matches for p in m["pairs"]]
-    out = {"images": len(matches)}
-    out.update(_summary(pairs, sum(m["found"] for m in matches),
-                        sum(m["missed"] for m in matches), sum(m["spurious"] for m in matches)))
-    return out

@@ -1,6 +1,6 @@
 """The robustness study (paper Secs. 8.4, 8.5): sensor noise, depth preprocessing, failure cases.
 
-    python -m pipeline.robustness [experiment=default] [robustness.closed_loop_trials=...]
+    python -m pipeline.stages.robustness [experiment=default] [robustness.closed_loop_trials=...]
 
 The paper trains and tests on noise-free simulated depth. This stage measures what a real
 SR300-class camera's depth (``conf/sensor/sr300.yaml``: noise growing with depth and incidence,
@@ -24,9 +24,9 @@ then measures, on the noisy generation's test split (the same heaps as the clean
 * **Table 1** (``pipeline.planner.evaluate``) for the clean- and the noisy-trained network, with
   each input of ``robustness.table1_inputs``: ``ideal`` depth, the sensor's depth, and the
   sensor's depth after each ``depth_filter`` preprocessing;
-* **Table 2** (``pipeline.baseline``'s measure: G_opt within 30 px of a true face centre) for
+* **Table 2** (``pipeline.stages.baseline``'s measure: G_opt within 30 px of a true face centre) for
   both networks and the Dex-Net-style planners, with the inputs of ``robustness.table2_inputs``;
-* the **closed loop** (``pipeline.evaluate``, DCNN only) for each variant of
+* the **closed loop** (``pipeline.stages.evaluate``, DCNN only) for each variant of
   ``robustness.closed_loop`` (which model; ``sensor``, ``depth_filter``, descriptor overrides)
   and of ``robustness.policies`` (Sec. 8.4's ranking tie-break and surface-area check), all on
   the same seeds. Each variant is an ordinary evaluation artifact, reused when it exists.
@@ -55,21 +55,35 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from pipeline.artifacts import (
-    compute_version, load_manifest, resolve_artifact, run_stage, stage_config)
+    compute_version,
+    load_manifest,
+    resolve_artifact,
+    run_stage,
+    stage_config,
+)
 from pipeline.artifacts.csvfile import write_rows
 from pipeline.artifacts.jsonfile import json_safe, write_json
-from pipeline.artifacts.stages import compared_pair, run_named_stage
+from pipeline.artifacts.stages import compared_pair
 from pipeline.artifacts.store import StageRun
-from pipeline.cli import (
-    CONF_DIR, compose, data_root, own_overrides, scale_overrides, stage_main,
+from pipeline.runtime.cli import (
+    CONF_DIR,
+    compose,
+    data_root,
+    own_overrides,
+    run_named_stage,
+    scale_overrides,
+    stage_main,
 )
 from pipeline.tracking import StageLog
-from pipeline.world.books import finite
+from pipeline.world.books import RATE_KEYS, finite
 
 STAGE = "robustness"
 SECTIONS = ("seed", "robustness")
-NOT_AFFECTING_RESULT = ("robustness.force",  # the versions are upstream
-                        "robustness.train_version", "robustness.baseline_version")
+NOT_AFFECTING_RESULT = (
+    "robustness.force",  # the versions are upstream
+    "robustness.train_version",
+    "robustness.baseline_version",
+)
 IDEAL, SENSOR = "ideal", "sensor"  # Table inputs; "sensor+<filter>": sensor depth, then a filter
 
 
@@ -106,17 +120,24 @@ class Pipelines:
         """The clean pipeline as it is (``compared_pair``; its train artifact's upstream label
         and generation artifacts), then the noisy pipeline, run or reused: with
         ``noisy_network`` a full one, trained; without, the test split's heaps and labels."""
-        pair = compared_pair(self.stage_dirs["baseline"].parent,
-                             self.stage_dirs["train"].parent, train_version, baseline_version,
-                             STAGE)
+        pair = compared_pair(
+            self.stage_dirs["baseline"].parent,
+            self.stage_dirs["train"].parent,
+            train_version,
+            baseline_version,
+            STAGE,
+        )
         self._use("train_clean", pair["train"])
         self._use("baseline", pair["baseline"])
         up = load_manifest(pair["train"]).get("upstream") or {}
         for stage in ("label", "generate"):
-            self._use(f"{stage}_clean", resolve_artifact(  # the train artifact's upstream
-                self.stage_dirs[stage].parent, stage, str(up.get(stage)), verify=True))
-        test_only = [] if noisy_network else ["generate.num_scenes=0",
-                                              "generate.num_val_scenes=0"]
+            self._use(
+                f"{stage}_clean",
+                resolve_artifact(  # the train artifact's upstream
+                    self.stage_dirs[stage].parent, stage, str(up.get(stage)), verify=True
+                ),
+            )
+        test_only = [] if noisy_network else ["generate.num_scenes=0", "generate.num_val_scenes=0"]
         gen = self._run("generate_noisy", "generate", [f"sensor={self.sensor}", *test_only])
         lab = self._run("label_noisy", "label", [f"label.generate_version={gen.name}"])
         if noisy_network:
@@ -128,11 +149,20 @@ class Pipelines:
         trained on the sensor's depth."""
         return ("clean", "noisy") if "train_noisy" in self.versions else ("clean",)
 
-    def evaluate(self, name: str, model: str, overrides: list[str], trials: int,
-                 split: str) -> Path:
-        return self._run(f"evaluate_{name}", "evaluate", [
-            "planner=dcnn", f"evaluate.train_version={self.versions['train_' + model]}",
-            f"evaluate.num_trials={trials}", f"evaluate.split={split}", *overrides])
+    def evaluate(
+        self, name: str, model: str, overrides: list[str], trials: int, split: str
+    ) -> Path:
+        return self._run(
+            f"evaluate_{name}",
+            "evaluate",
+            [
+                "planner=dcnn",
+                f"evaluate.train_version={self.versions['train_' + model]}",
+                f"evaluate.num_trials={trials}",
+                f"evaluate.split={split}",
+                *overrides,
+            ],
+        )
 
 
 # ------------------------------------------------------------------------------ Tables 1 and 2
@@ -141,8 +171,10 @@ def _filter_cfg(name: str):
     path = Path(CONF_DIR) / "depth_filter" / f"{name}.yaml"
     if not path.is_file():
         choices = sorted(p.stem for p in path.parent.glob("*.yaml"))
-        raise ValueError(f"unknown depth filter {name!r} in a robustness input: choose from "
-                         f"{choices} (input names: ideal, sensor, sensor+<filter>)")
+        raise ValueError(
+            f"unknown depth filter {name!r} in a robustness input: choose from "
+            f"{choices} (input names: ideal, sensor, sensor+<filter>)"
+        )
     return OmegaConf.load(path)
 
 
@@ -157,19 +189,22 @@ def depth_getter(input_name: str):
         return lambda scene: scene.depth_m
     head, _, filt = input_name.partition("+")
     if head != SENSOR or not filt:
-        raise ValueError(f"robustness input {input_name!r}: use ideal, sensor or "
-                         "sensor+<depth_filter> (e.g. sensor+fill)")
+        raise ValueError(
+            f"robustness input {input_name!r}: use ideal, sensor or "
+            "sensor+<depth_filter> (e.g. sensor+fill)"
+        )
     fc = _filter_cfg(filt)
     return lambda scene: preprocess_depth(scene.depth_m, fc)
 
 
-def table1_rows(p: Pipelines, inputs: list[str], radius_px: float, max_images: int,
-                progress: bool) -> list[dict]:
+def table1_rows(
+    p: Pipelines, inputs: list[str], radius_px: float, max_images: int, progress: bool
+) -> list[dict]:
     """Table 1 of each network on each input (the noisy generation's test split)."""
     from tqdm import tqdm
 
-    from pipeline.dataset.scenes import SceneDataset
     from pipeline.dataset.labels import LabelSet
+    from pipeline.dataset.scenes import SceneDataset
     from pipeline.planner.data import GraspDataset
     from pipeline.planner.planner import Planner
     from pipeline.planner.scoring import table1
@@ -179,21 +214,37 @@ def table1_rows(p: Pipelines, inputs: list[str], radius_px: float, max_images: i
     rows = []
     for model in p.models:
         planner = Planner.load(p.dirs[f"train_{model}"])
-        data = GraspDataset(gen_dir, LabelSet(label_dir, "test"), "test", planner.norm,
-                            planner.net.cfg.grid, limit=max_images)
-        for name in tqdm(inputs, desc=f"{STAGE} table 1 ({model}-trained)", unit="input",
-                         disable=not progress):
+        data = GraspDataset(
+            gen_dir,
+            LabelSet(label_dir, "test"),
+            "test",
+            planner.norm,
+            planner.net.cfg.grid,
+            limit=max_images,
+        )
+        for name in tqdm(
+            inputs, desc=f"{STAGE} table 1 ({model}-trained)", unit="input", disable=not progress
+        ):
             get = depth_getter(name)
-            res = table1(planner, data, radius_px, depth_of=lambda i: get(scenes[i]))
-            rows.append({"model": model, "input": name,
-                         **{k: (round(res[k], 6) if res[k] is not None else None)
-                            for k in ("top1", "top1pct", "top5pct", "top10pct")},
-                         "predictions": res["num_predictions"], "images": res["num_images"]})
+            res = table1(planner, data, radius_px, depth_of=lambda i, get=get: get(scenes[i]))
+            rows.append(
+                {
+                    "model": model,
+                    "input": name,
+                    **{
+                        k: (round(res[k], 6) if res[k] is not None else None)
+                        for k in ("top1", "top1pct", "top5pct", "top10pct")
+                    },
+                    "predictions": res["num_predictions"],
+                    "images": res["num_images"],
+                }
+            )
     return rows
 
 
-def table2_rows(p: Pipelines, inputs: list[str], max_images: int, progress: bool
-                ) -> tuple[list[dict], dict]:
+def table2_rows(
+    p: Pipelines, inputs: list[str], max_images: int, progress: bool
+) -> tuple[list[dict], dict]:
     """Table 2 of both networks and the Dex-Net-style planners on each input."""
     from pipeline.dataset.scenes import SceneDataset
     from pipeline.dexnet import table2
@@ -204,25 +255,37 @@ def table2_rows(p: Pipelines, inputs: list[str], max_images: int, progress: bool
     gen = SceneDataset(gen_dir, "test")
     planners = table2.make_planners(cfg, gen, p.dirs["baseline"], None)
     nets = {m: Planner.load(p.dirs[f"train_{m}"]) for m in p.models}
-    ours = {f"dcnn_{m}": (lambda depth, intr, i, net=net: net.plan(depth, intr))
-            for m, net in nets.items()}
+    ours = {
+        f"dcnn_{m}": (lambda depth, intr, i, net=net: net.plan(depth, intr))
+        for m, net in nets.items()
+    }
     planners = {**ours, **planners}
     radius = float(cfg.baseline.table2_radius_px)
     rows, picks = [], {}
     for name in inputs:
-        res = table2.evaluate_table2(cfg, gen_dir, p.dirs["baseline"], None, progress,
-                                     planners=planners, depth_of=depth_getter(name))
+        res = table2.evaluate_table2(
+            cfg,
+            gen_dir,
+            p.dirs["baseline"],
+            None,
+            progress,
+            planners=planners,
+            depth_of=depth_getter(name),
+        )
         picks[name] = {k: res[f"{k}_uv"] for k in res["planners"]}
         for r in table2.table2_rows(res, radius, np.array([radius]))[0]:
-            rows.append({"planner": r["planner"], "input": name,
-                         **{k: v for k, v in r.items() if k not in ("planner", "name")}})
+            rows.append(
+                {
+                    "planner": r["planner"],
+                    "input": name,
+                    **{k: v for k, v in r.items() if k not in ("planner", "name")},
+                }
+            )
     return rows, picks
 
 
 # ------------------------------------------------------------------------------ closed loop
-CLOSED_LOOP_KEYS = ("success_rate", "success_ci_low", "success_ci_high", "attempts",
-                    "successes", "picked", "boxes", "picked_rate", "picked_ci_low",
-                    "picked_ci_high", "pph_motion", "no_attempt_reason")
+CLOSED_LOOP_KEYS = (*RATE_KEYS, "no_attempt_reason")
 
 
 def closed_loop_rows(p: Pipelines, group: str, variants, trials: dict[str, int]) -> list[dict]:
@@ -234,18 +297,26 @@ def closed_loop_rows(p: Pipelines, group: str, variants, trials: dict[str, int])
     for v in variants:
         split = str(v.split)
         if split not in HEAP_STREAMS:
-            raise ValueError(f"robustness variant {v.name}: split {split!r}, choose from "
-                             f"{tuple(HEAP_STREAMS)}")
+            raise ValueError(
+                f"robustness variant {v.name}: split {split!r}, choose from {tuple(HEAP_STREAMS)}"
+            )
         overrides = [str(o) for o in v.overrides]
         out = p.evaluate(str(v.name), str(v.model), overrides, trials[split], split)
         t3 = json.loads((out / "manifest.json").read_text())["metrics"]["table3"]
         row = next(r for r in t3 if r["planner"] == "dcnn")
-        rows.append({"group": group, "variant": str(v.name), "model": str(v.model),
-                     "split": split, "trials": row.get("trials"),
-                     "overrides": " ".join(overrides) or "-",
-                     **{k: finite(row.get(k)) for k in CLOSED_LOOP_KEYS},
-                     **{k: v for k, v in row.items() if k.startswith(("fail_", "end_"))},
-                     "evaluate_version": out.name})
+        rows.append(
+            {
+                "group": group,
+                "variant": str(v.name),
+                "model": str(v.model),
+                "split": split,
+                "trials": row.get("trials"),
+                "overrides": " ".join(overrides) or "-",
+                **{k: finite(row.get(k)) for k in CLOSED_LOOP_KEYS},
+                **{k: v for k, v in row.items() if k.startswith(("fail_", "end_"))},
+                "evaluate_version": out.name,
+            }
+        )
     return rows
 
 
@@ -255,8 +326,12 @@ def _log(log: StageLog, p: Pipelines, picks: dict, count: int, tables: dict) -> 
     from pipeline.dataset.scenes import SceneDataset
 
     scenes = SceneDataset(p.dirs["generate_noisy"], "test")
-    colors = {"dcnn_clean": [40, 200, 40], "dcnn_noisy": [230, 160, 20],
-              "gqcnn": [200, 40, 40], "planarity": [120, 120, 255]}
+    colors = {
+        "dcnn_clean": [40, 200, 40],
+        "dcnn_noisy": [230, 160, 20],
+        "gqcnn": [200, 40, 40],
+        "planarity": [120, 120, 255],
+    }
     for i in range(min(count, len(scenes))):
         scene = scenes[i]
         log.set_time(sequences={"test_image": i}, clock_ns=i * 1_000_000_000)
@@ -266,8 +341,11 @@ def _log(log: StageLog, p: Pipelines, picks: dict, count: int, tables: dict) -> 
             log.log_depth(f"{ent}/depth", depth_getter(name)(scene))
             for planner, uv in picks[name].items():
                 if i < len(uv) and np.isfinite(uv[i]).all():
-                    log.log_points(f"{ent}/g_opt/{planner}", pixels_to_points(scene, uv[i]),
-                                   np.asarray([colors.get(planner, [255, 255, 255])], np.uint8))
+                    log.log_points(
+                        f"{ent}/g_opt/{planner}",
+                        pixels_to_points(scene, uv[i]),
+                        np.asarray([colors.get(planner, [255, 255, 255])], np.uint8),
+                    )
         lost = float(np.mean((scene.depth_m == 0) & (scene.depth_clean_m > 0)))
         log.log_scalar("sensor/missing_fraction", lost)
         log.log_text("log", f"test image {i}: {100 * lost:.1f} % of pixels without data")
@@ -294,17 +372,23 @@ def robustness(cfg: DictConfig, overrides: list[str] | None = None) -> Path:
 
     for v in list(rc.closed_loop) + list(rc.policies):
         if str(v.model) not in ("clean", "noisy"):
-            raise ValueError(f"robustness variant {v.name!r} has model={v.model!r}: use clean "
-                             "(the network under test) or noisy (trained on the sensor's depth, "
-                             "with robustness.noisy_network)")
+            raise ValueError(
+                f"robustness variant {v.name!r} has model={v.model!r}: use clean "
+                "(the network under test) or noisy (trained on the sensor's depth, "
+                "with robustness.noisy_network)"
+            )
         if str(v.model) == "noisy" and not bool(rc.noisy_network):
-            raise ValueError(f"robustness variant {v.name!r} uses model=noisy but "
-                             "robustness.noisy_network is false (no second network is trained): "
-                             "use model=clean, or set robustness.noisy_network=true")
+            raise ValueError(
+                f"robustness variant {v.name!r} uses model=noisy but "
+                "robustness.noisy_network is false (no second network is trained): "
+                "use model=clean, or set robustness.noisy_network=true"
+            )
         if str(v.split) not in HEAP_STREAMS:
-            raise ValueError(f"robustness variant {v.name!r} has split={v.split!r}: use dev "
-                             f"({rc.closed_loop_trials} trials) or test (the evaluation's "
-                             f"{cfg.evaluate.num_trials} test heaps)")
+            raise ValueError(
+                f"robustness variant {v.name!r} has split={v.split!r}: use dev "
+                f"({rc.closed_loop_trials} trials) or test (the evaluation's "
+                f"{cfg.evaluate.num_trials} test heaps)"
+            )
     # dev variants: the study's own count; test: the evaluation's (Table 3's heaps)
     trials = {"dev": int(rc.closed_loop_trials), "test": int(cfg.evaluate.num_trials)}
     with p.keep_latest():
@@ -314,8 +398,11 @@ def robustness(cfg: DictConfig, overrides: list[str] | None = None) -> Path:
     upstream = dict(sorted(p.versions.items()))
     config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
     # the preprocessing behind each sensor+<filter> input is read from conf/depth_filter/
-    filters = {n.partition("+")[2]: OmegaConf.to_container(_filter_cfg(n.partition("+")[2]))
-               for n in sorted(set(t1_inputs + t2_inputs)) if "+" in n}
+    filters = {
+        n.partition("+")[2]: OmegaConf.to_container(_filter_cfg(n.partition("+")[2]))
+        for n in sorted(set(t1_inputs + t2_inputs))
+        if "+" in n
+    }
     config["robustness"]["depth_filters"] = filters
     version = compute_version(STAGE, config, upstream)
 
@@ -325,18 +412,24 @@ def robustness(cfg: DictConfig, overrides: list[str] | None = None) -> Path:
         write_rows(run.work_dir / "table1.csv", t1)
         write_rows(run.work_dir / "table2.csv", t2)
         write_rows(run.work_dir / "closed_loop.csv", cl)
-        tables = {"table1": t1, "table2": t2, "closed_loop": cl,
-                  "sensor": OmegaConf.to_container(
-                      compose("generate", base + [f"sensor={rc.sensor}"]).sensor, resolve=True),
-                  "depth_filters": filters, "artifacts": upstream}
+        tables = {
+            "table1": t1,
+            "table2": t2,
+            "closed_loop": cl,
+            "sensor": OmegaConf.to_container(
+                compose("generate", base + [f"sensor={rc.sensor}"]).sensor, resolve=True
+            ),
+            "depth_filters": filters,
+            "artifacts": upstream,
+        }
         tables = json_safe(tables)
         write_json(run.work_dir / "robustness.json", tables)
         run.metrics.update({k: tables[k] for k in ("table1", "table2", "closed_loop")})
         with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version) as log:
             _log(log, p, picks, int(rc.log_images), tables)
 
-    return run_stage(data_root(cfg), STAGE, version, config, upstream, body,
-                     seed=int(cfg.seed), force=bool(rc.force))
+    seed, force = int(cfg.seed), bool(rc.force)
+    return run_stage(data_root(cfg), STAGE, version, config, upstream, body, seed=seed, force=force)
 
 
 @hydra.main(config_path=CONF_DIR, config_name="robustness", version_base="1.3")

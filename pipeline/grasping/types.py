@@ -24,12 +24,27 @@ class GraspClass(IntEnum):
 # The hand-level reasons (too_small, center_occluded) first, then the robot-level checks, then
 # the hold check (``hand.hold_check``) and the final press's check (``press``), each appended
 # so that the earlier codes keep their values.
-NG_REASONS = ("", "too_small", "center_occluded", "ik", "joint_limits", "collision",
-              "path_collision", "path_joint_limits", "path_timeout", "path_lost", "hold",
-              "press")
+NG_REASONS = (
+    "",
+    "too_small",
+    "center_occluded",
+    "ik",
+    "joint_limits",
+    "collision",
+    "path_collision",
+    "path_joint_limits",
+    "path_timeout",
+    "path_lost",
+    "hold",
+    "press",
+)
 # Display colour (RGB) of each class in logs and figures.
-CLASS_COLORS = {GraspClass.R: (230, 60, 60), GraspClass.L: (60, 200, 60),
-                GraspClass.B: (60, 120, 255), GraspClass.NG: (150, 150, 150)}
+CLASS_COLORS = {
+    GraspClass.R: (230, 60, 60),
+    GraspClass.L: (60, 200, 60),
+    GraspClass.B: (60, 120, 255),
+    GraspClass.NG: (150, 150, 150),
+}
 
 
 @dataclass

@@ -1,4 +1,4 @@
-"""Open a stage's latest Rerun log in the viewer: ``python -m pipeline.view generate``.
+"""Open a stage's latest Rerun log in the viewer: ``python -m pipeline.tools.view generate``.
 
 Without a display (no ``$DISPLAY`` / ``$WAYLAND_DISPLAY``) it prints the command to run on a
 machine that has one, and the path of the MCAP file for Foxglove.
@@ -28,8 +28,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("stage", help="stage name, e.g. generate")
     parser.add_argument("version", nargs="?", default="latest")
-    parser.add_argument("--root", type=Path,
-                        default=Path(os.environ.get("BINPICK_ROOT", REPO_ROOT)))
+    parser.add_argument(
+        "--root", type=Path, default=Path(os.environ.get("BINPICK_ROOT", REPO_ROOT))
+    )
     args = parser.parse_args(argv)
     top = args.root / ("models" if args.stage in MODEL_STAGES else "data")
     try:

@@ -1,6 +1,6 @@
 """Ablation of the closed loop's execution: each extension on and off, on the same heaps.
 
-    python -m pipeline.ablation [experiment=default] [ablation.planners=[oracle,dcnn]]
+    python -m pipeline.stages.ablation [experiment=default] [ablation.planners=[oracle,dcnn]]
 
 Each variant of ``ablation.variants`` (``conf/stage/ablation.yaml``) is one run of the evaluation
 stage with the variant's overrides, for each planner of ``ablation.planners`` (or only
@@ -25,7 +25,6 @@ afterwards, so that it still names the ``make reproduce`` evaluation.
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 
 import hydra
@@ -34,29 +33,28 @@ from omegaconf import DictConfig
 from pipeline.artifacts import compute_version, run_stage, stage_config
 from pipeline.artifacts.csvfile import write_rows
 from pipeline.artifacts.store import StageRun
-from pipeline.cli import (
-    CONF_DIR, compose, data_root, own_overrides, scale_overrides, stage_main,
+from pipeline.runtime.cli import (
+    CONF_DIR,
+    compose,
+    data_root,
+    own_overrides,
+    scale_overrides,
+    stage_main,
 )
 from pipeline.tracking import StageLog
+from pipeline.world.books import RATE_KEYS, finite
 
 STAGE = "ablation"
 SECTIONS = ("seed", "ablation")
 NOT_AFFECTING_RESULT = ("ablation.force",)
 SPLIT = "dev"  # the ablation chooses between execution variants: never on the test heaps
-ROW_KEYS = ("success_rate", "success_ci_low", "success_ci_high", "attempts", "successes",
-            "picked", "boxes", "picked_rate", "picked_ci_low", "picked_ci_high", "pph_motion",
-            "path_deviation_mm_median", "path_deviation_mm_max", "no_attempt_reason")
-
-
-def _finite(value):
-    """NaN (e.g. the success rate of a run without attempts) → None (JSON null)."""
-    return None if isinstance(value, float) and math.isnan(value) else value
+ROW_KEYS = (*RATE_KEYS, "path_deviation_mm_median", "path_deviation_mm_max", "no_attempt_reason")
 
 
 def run_variants(cfg: DictConfig, base: list[str]) -> list[dict]:
     """One evaluation per (planner, variant) and its Table 3 row, in config order."""
     from pipeline.artifacts.pointers import keep_latest
-    from pipeline.evaluate import evaluate
+    from pipeline.stages.evaluate import evaluate
 
     ab = cfg.ablation
     rows = []
@@ -66,41 +64,53 @@ def run_variants(cfg: DictConfig, base: list[str]) -> list[dict]:
                 if planner not in ab.variant_planners.get(v.name, [planner]):
                     continue  # the variant does not change this planner's trials
                 overrides = [str(o) for o in v.overrides]
-                extra = [f"planner={planner}", f"evaluate.num_trials={int(ab.trials)}",
-                         f"evaluate.split={SPLIT}", *overrides]
-                print(f"[{STAGE}] {planner} / {v.name}: evaluate {' '.join(base + extra)}",
-                      flush=True)
+                extra = [
+                    f"planner={planner}",
+                    f"evaluate.num_trials={int(ab.trials)}",
+                    f"evaluate.split={SPLIT}",
+                    *overrides,
+                ]
+                print(
+                    f"[{STAGE}] {planner} / {v.name}: evaluate {' '.join(base + extra)}", flush=True
+                )
                 out = Path(evaluate(compose("evaluate", base + extra)))
                 t3 = json.loads((out / "manifest.json").read_text())["metrics"]["table3"]
                 row = next(r for r in t3 if r["planner"] == planner)
-                rows.append({"planner": planner, "variant": str(v.name),
-                             "meaning": str(v.meaning),
-                             "overrides": " ".join(overrides) or "-",
-                             **{k: _finite(row.get(k)) for k in ROW_KEYS},
-                             **{k: val for k, val in row.items()
-                                if k.startswith(("fail_", "end_"))},
-                             "evaluate_version": out.name})
+                rows.append(
+                    {
+                        "planner": planner,
+                        "variant": str(v.name),
+                        "meaning": str(v.meaning),
+                        "overrides": " ".join(overrides) or "-",
+                        **{k: finite(row.get(k)) for k in ROW_KEYS},
+                        **{k: val for k, val in row.items() if k.startswith(("fail_", "end_"))},
+                        "evaluate_version": out.name,
+                    }
+                )
     return rows
 
 
 def ablation(cfg: DictConfig, overrides: list[str] | None = None) -> Path:
     """Run the ablation; returns its artifact folder. ``overrides``: passed to every run (the
     command line's own, by default none)."""
-    from pipeline.evaluate import PLANNERS
+    from pipeline.stages.evaluate import PLANNERS
 
     ab = cfg.ablation
     for planner in ab.planners:
         if str(planner) not in PLANNERS:
-            raise ValueError(f"ablation.planners has {planner!r}: choose from "
-                             f"{', '.join(PLANNERS)}")
+            raise ValueError(
+                f"ablation.planners has {planner!r}: choose from {', '.join(PLANNERS)}"
+            )
     names = [str(v.name) for v in ab.variants]
     if len(set(names)) != len(names):
         raise ValueError(f"ablation.variants has repeated names: {names}; give each its own")
     for name, planners in ab.variant_planners.items():
         for planner in planners:
             if str(planner) not in PLANNERS:
-                raise ValueError(f"ablation.variant_planners.{name} has {planner!r}: choose "
-                                 f"from {', '.join(PLANNERS)}")
+                raise ValueError(
+                    f"ablation.variant_planners.{name} has {planner!r}: choose "
+                    f"from {', '.join(PLANNERS)}"
+                )
     base = scale_overrides(cfg, overrides)
     rows = run_variants(cfg, base)
     upstream = {f"{r['planner']}/{r['variant']}": r["evaluate_version"] for r in rows}
@@ -118,8 +128,8 @@ def ablation(cfg: DictConfig, overrides: list[str] | None = None) -> Path:
                     log.log_scalar(f"{row['planner']}/success_rate", float(row["success_rate"]))
                 log.log_text("log", "ablation: " + json.dumps(row))
 
-    return run_stage(data_root(cfg), STAGE, version, config, upstream, body,
-                     seed=int(cfg.seed), force=bool(ab.force))
+    seed, force = int(cfg.seed), bool(ab.force)
+    return run_stage(data_root(cfg), STAGE, version, config, upstream, body, seed=seed, force=force)
 
 
 @hydra.main(config_path=CONF_DIR, config_name="ablation", version_base="1.3")

@@ -1,6 +1,6 @@
 """Measured figures of the out-of-domain training heaps of the Dex-Net-style baseline.
 
-    python -m pipeline.bench_ood [--experiment default] [--scenes 8]
+    python -m pipeline.tools.bench_ood [--experiment default] [--scenes 8]
 
 Prints, on object heaps of ``conf/objects/`` in one process: ms per 416 x 416 frame of the
 three ways to render them (the half-space ray cast ``pipeline.camera.raycast_convex``,
@@ -22,10 +22,10 @@ import pybullet as p
 from pipeline.camera.geometry import Intrinsics, camera_pose_above_bin
 from pipeline.camera.raycast_convex import convex_from_pybullet, raycast_convex
 from pipeline.camera.render import render_depth
-from pipeline.cli import compose
+from pipeline.cell.bin import build_cell
 from pipeline.dexnet.contact_mesh import RayScene
 from pipeline.dexnet.ood import connect, object_heap_scene, object_scene_rng
-from pipeline.cell.bin import build_cell
+from pipeline.runtime.cli import compose
 from pipeline.simulation.object_heap import drop_object_heap
 
 
@@ -33,13 +33,18 @@ def _ray_test_batch(client: int, intr: Intrinsics, T: np.ndarray, near: float, f
     """Depth by ``p.rayTestBatch`` on a ``RayScene`` mirror of every body: (H, W) z-depth."""
     with RayScene(client) as rays:
         u, v = np.meshgrid(np.arange(intr.width), np.arange(intr.height))
-        r = np.stack([(u - intr.cx) / intr.fx, (v - intr.cy) / intr.fy,
-                      np.ones(u.shape)], -1).reshape(-1, 3) @ T[:3, :3].T
+        r = (
+            np.stack(
+                [(u - intr.cx) / intr.fx, (v - intr.cy) / intr.fy, np.ones(u.shape)], -1
+            ).reshape(-1, 3)
+            @ T[:3, :3].T
+        )
         starts, ends = T[:3, 3] + near * r, T[:3, 3] + far * r
         hits = []
         for i in range(0, len(r), 8192):
-            hits += p.rayTestBatch(starts[i:i + 8192], ends[i:i + 8192], numThreads=1,
-                                   physicsClientId=rays.client)
+            hits += p.rayTestBatch(
+                starts[i : i + 8192], ends[i : i + 8192], numThreads=1, physicsClientId=rays.client
+            )
     frac = np.array([h[2] for h in hits])
     return (near + frac * (far - near)).reshape(intr.height, intr.width)
 
@@ -54,8 +59,9 @@ def render_figures(cfg, heaps: int) -> dict[str, float]:
     try:
         for i in range(heaps):
             cell = build_cell(c, cfg.bin, cfg.physics)
-            heap = drop_object_heap(c, object_scene_rng(int(cfg.seed), 9, i), cfg.objects,
-                                    cfg.bin, cfg.physics)
+            heap = drop_object_heap(
+                c, object_scene_rng(int(cfg.seed), 9, i), cfg.objects, cfg.bin, cfg.physics
+            )
             bodies = cell[1:] + [o.body_id for o in heap.objects]
             t0 = time.perf_counter()
             depth, ids = raycast_convex(convex_from_pybullet(c, bodies), intr, T, near, far)
@@ -85,14 +91,16 @@ def scene_figures(cfg, scenes: int) -> dict[str, float]:
     try:
         t0 = time.perf_counter()
         for i in range(scenes):
-            object_heap_scene(c, cfg, object_scene_rng(int(cfg.seed), 0, i), count, sensor,
-                              1e-4)
+            object_heap_scene(c, cfg, object_scene_rng(int(cfg.seed), 0, i), count, sensor, 1e-4)
         per = (time.perf_counter() - t0) / max(scenes, 1)
     finally:
         p.disconnect(c)
     total = int(cfg.baseline.ood.num_scenes) + int(cfg.baseline.ood.num_val_scenes)
-    return {"s_per_labelled_heap": round(per, 3), "heaps": total,
-            "projected_h_one_process": round(total * per / 3600.0, 2)}
+    return {
+        "s_per_labelled_heap": round(per, 3),
+        "heaps": total,
+        "projected_h_one_process": round(total * per / 3600.0, 2),
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -101,8 +109,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--scenes", type=int, default=8)
     args = parser.parse_args(argv)
     cfg = compose("baseline", [f"experiment={args.experiment}"])
-    for k, v in {**render_figures(cfg, max(1, args.scenes // 2)),
-                 **scene_figures(cfg, args.scenes)}.items():
+    for k, v in {
+        **render_figures(cfg, max(1, args.scenes // 2)),
+        **scene_figures(cfg, args.scenes),
+    }.items():
         print(f"{k}: {v}")
     return 0
 

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import NamedTuple, Optional
+from typing import NamedTuple
 
 import numpy as np
 
@@ -51,15 +51,28 @@ class GraspCheck(NamedTuple):
             the rotation that passed (None without ``robot.path_check``).
     """
 
-    reason: Optional[str]
-    x_world: Optional[np.ndarray]
-    path: Optional[list]
+    reason: str | None
+    x_world: np.ndarray | None
+    path: list | None
 
 
-def check_grasp(robot: Robot, cfg, hand_cfg, T_world_cam: np.ndarray, centre_cam: np.ndarray,
-                normal_cam: np.ndarray, long_cam: np.ndarray, short_cam: np.ndarray,
-                x_axis_cam: np.ndarray, pattern: str, intrinsics, obstacle_ids, ignore_body_ids,
-                bin_ids=(), bin_clearance: float | None = None) -> GraspCheck:
+def check_grasp(
+    robot: Robot,
+    cfg,
+    hand_cfg,
+    T_world_cam: np.ndarray,
+    centre_cam: np.ndarray,
+    normal_cam: np.ndarray,
+    long_cam: np.ndarray,
+    short_cam: np.ndarray,
+    x_axis_cam: np.ndarray,
+    pattern: str,
+    intrinsics,
+    obstacle_ids,
+    ignore_body_ids,
+    bin_ids=(),
+    bin_clearance: float | None = None,
+) -> GraspCheck:
     """The robot-level check of a grasp seen from the home camera ``T_world_cam`` (4, 4).
 
     For each hand rotation about the normal (``hand_cfg.rotations_deg``, in order): the target
@@ -67,7 +80,8 @@ def check_grasp(robot: Robot, cfg, hand_cfg, T_world_cam: np.ndarray, centre_cam
     ``x_axis_cam`` turned by the rotation; home camera frame, metres) must be reached by IK
     from home, in the joint limits, clear of ``obstacle_ids`` except ``ignore_body_ids``
     (:meth:`Robot.solve_ik`), and the final press from it along the camera's axis must end
-    clear of the bin with every link but the cups (:func:`_press_reason`). With ``robot.path_check``, so must the motion to it: the 2.5D
+    clear of the bin with every link but the cups (:func:`press_reason`). With
+    ``robot.path_check``, so must the motion to it: the 2.5D
     VS from home through ``motion.approach``'s first goal to that pose, predicted on the exact
     surface (``centre_cam``, ``normal_cam``, axes ``long_cam``, ``short_cam``;
     :func:`pipeline.servo.predict.servo_motion`), must converge within ``servo.timeout_s``
@@ -94,18 +108,38 @@ def check_grasp(robot: Robot, cfg, hand_cfg, T_world_cam: np.ndarray, centre_cam
         for rot in hand_rotations(pattern, hand_cfg.rotations_deg):
             x_rot = rotate_about(x_axis_cam, normal_cam, rot)
             grasp = T_world_cam @ target_camera_pose(
-                centre_cam, normal_cam, x_rot, pattern, standoff=float(hand_cfg.standoff),
-                cup_offset=float(hand_cfg.cup_offset))
-            res = robot.solve_ik(grasp, seed_q=home, obstacle_ids=obstacle_ids,
-                                 ignore_body_ids=ignore_body_ids)
+                centre_cam,
+                normal_cam,
+                x_rot,
+                pattern,
+                standoff=float(hand_cfg.standoff),
+                cup_offset=float(hand_cfg.cup_offset),
+            )
+            res = robot.solve_ik(
+                grasp, seed_q=home, obstacle_ids=obstacle_ids, ignore_body_ids=ignore_body_ids
+            )
             reason, poses = res.reason, None
             if reason is None:
-                reason = _press_reason(robot, grasp, res.q, hand_cfg, cfg, bin_ids)
+                reason = press_reason(robot, grasp, res.q, hand_cfg, cfg, bin_ids)
             if reason is None and path_cfg is not None:
-                reason, poses = _path_reason(robot, cfg, home, T_world_cam, centre_cam,
-                                             normal_cam, long_cam, short_cam, x_rot,
-                                             grasp[:3, 0], pattern, intrinsics, path_cfg,
-                                             obstacle_ids, ignore_body_ids, bin_ids)
+                reason, poses = _path_reason(
+                    robot,
+                    cfg,
+                    home,
+                    T_world_cam,
+                    centre_cam,
+                    normal_cam,
+                    long_cam,
+                    short_cam,
+                    x_rot,
+                    grasp[:3, 0],
+                    pattern,
+                    intrinsics,
+                    path_cfg,
+                    obstacle_ids,
+                    ignore_body_ids,
+                    bin_ids,
+                )
             if reason is None:
                 return GraspCheck(None, grasp[:3, 0].copy(), poses)
             first = first or reason
@@ -114,8 +148,9 @@ def check_grasp(robot: Robot, cfg, hand_cfg, T_world_cam: np.ndarray, centre_cam
     return GraspCheck(first, None, None)
 
 
-def _press_reason(robot, grasp: np.ndarray, q_grasp: np.ndarray, hand_cfg, cfg,
-                  bin_ids) -> str | None:
+def press_reason(
+    robot, grasp: np.ndarray, q_grasp: np.ndarray, hand_cfg, cfg, bin_ids
+) -> str | None:
     """None when the final press (from the grasp pose ``grasp``, (4, 4) world, along the camera's
     axis until the lips touch the surface and press ``motion.press_depth``) ends clear of the
     bin ``bin_ids`` with every link but the cups, which are meant to touch; else "press". The
@@ -127,30 +162,60 @@ def _press_reason(robot, grasp: np.ndarray, q_grasp: np.ndarray, hand_cfg, cfg,
     res = robot.solve_ik(pressed, seed_q=q_grasp, obstacle_ids=())
     if res.reason is not None:
         return "press"
-    hits = [c for c in robot.in_collision(res.q, list(bin_ids), self_collision=False)
-            if not c.robot_link.startswith("cup")]
+    hits = [
+        c
+        for c in robot.in_collision(res.q, list(bin_ids), self_collision=False)
+        if not c.robot_link.startswith("cup")
+    ]
     return "press" if hits else None
 
 
-def _path_reason(robot, cfg, home, T_world_cam, centre_cam, normal_cam, long_cam, short_cam,
-                 x_cam, x_world, pattern, intrinsics, path_cfg, obstacle_ids, ignore_body_ids,
-                 bin_ids):
+def _path_reason(
+    robot,
+    cfg,
+    home,
+    T_world_cam,
+    centre_cam,
+    normal_cam,
+    long_cam,
+    short_cam,
+    x_cam,
+    x_world,
+    pattern,
+    intrinsics,
+    path_cfg,
+    obstacle_ids,
+    ignore_body_ids,
+    bin_ids,
+):
     """(None when the servo from home, predicted on the exact surface, converges and its motion
     passes, else "path_" + the servo's or the motion check's reason; the predicted camera
     poses)."""
     servo = servo_config(cfg)
-    goal, _ = first_goal(servo, cfg, T_world_cam, centre_cam, normal_cam, x_cam, pattern,
-                         intrinsics)
+    goal, _ = first_goal(
+        servo, cfg, T_world_cam, centre_cam, normal_cam, x_cam, pattern, intrinsics
+    )
     goals = [servo] if goal is servo else [goal, servo]
     dt = 1.0 / float(cfg.servo.control_rate_hz)
     R, t = T_world_cam[:3, :3], T_world_cam[:3, 3]
-    motion = servo_motion(robot, home, R @ centre_cam + t, R @ normal_cam, R @ long_cam,
-                          R @ short_cam, pattern, goals, dt,
-                          int(math.ceil(float(cfg.servo.timeout_s) / dt)),
-                          float(cfg.servo.joint_damping), float(cfg.motion.max_joint_speed),
-                          x_world)
+    motion = servo_motion(
+        robot,
+        home,
+        R @ centre_cam + t,
+        R @ normal_cam,
+        R @ long_cam,
+        R @ short_cam,
+        pattern,
+        goals,
+        dt,
+        int(math.ceil(float(cfg.servo.timeout_s) / dt)),
+        float(cfg.servo.joint_damping),
+        float(cfg.motion.max_joint_speed),
+        x_world,
+    )
     if motion.reason is not None:
         return "path_" + motion.reason, motion.poses
-    path = check_motion(robot, motion.q, motion.poses, path_cfg, obstacle_ids,
-                        ignore_body_ids, bin_ids)
+    path = check_motion(
+        robot, motion.q, motion.poses, path_cfg, obstacle_ids, ignore_body_ids, bin_ids
+    )
     return (None if path.ok else "path_" + path.reason), motion.poses

@@ -1,6 +1,6 @@
 """Unseen box sizes: Tables 1 and 2 on heaps of boxes the network never saw in training.
 
-    python -m pipeline.unseen [experiment=default] [unseen.boxes=unseen]
+    python -m pipeline.stages.unseen [experiment=default] [unseen.boxes=unseen]
 
 The paper trains on three box sizes (Sec. 4.3) and claims the planner generalises to the 12 box
 types of its experiments (Fig. 8). This stage measures that claim on the planner's own tables.
@@ -10,15 +10,18 @@ With the command's own overrides:
   compared it (``unseen.baseline_version``; both ``latest`` by default, as ``make reproduce``
   leaves them): the network and the Dex-Net-style GQ-CNNs, trained on the three training sizes
   (the in-domain one) or on other objects;
-* it runs (or reuses) ``generate boxes=<unseen.boxes>`` with a test split only (``unseen.test_scenes`` heaps; no
+* it runs (or reuses) ``generate boxes=<unseen.boxes>`` with a test split only
+(``unseen.test_scenes`` heaps; no
   training or validation scenes) and its ``label`` artifact;
 
 then measures on that unseen-size test split:
 
 * **Table 1** (``pipeline.planner.evaluate``, the model's calibrated th) of the trained network;
-* **Table 2** (``pipeline.baseline``'s measure: G_opt less than 30 px from a true face centre) of
+* **Table 2** (``pipeline.stages.baseline``'s measure: G_opt less than 30 px from a true face
+centre) of
   the trained network and the Dex-Net-style planners;
-* **the closed loop** (``pipeline.evaluate``, unless ``unseen.closed_loop_trials`` is 0): every
+* **the closed loop** (``pipeline.stages.evaluate``, unless ``unseen.closed_loop_trials`` is 0):
+every
   planner of ``evaluate.planners`` (the DCNN, the Dex-Net-style planners, the oracle) on
   ``unseen.closed_loop_trials`` heaps of 12 boxes of the unseen sizes
   (``eval_boxes=<unseen.closed_loop_boxes>``), the test split, observation-only execution:
@@ -51,45 +54,68 @@ import hydra
 import numpy as np
 from omegaconf import DictConfig
 
-from pipeline.artifacts import (
-    compute_version, load_manifest, run_stage, stage_config)
+from pipeline.artifacts import compute_version, load_manifest, run_stage, stage_config
 from pipeline.artifacts.csvfile import write_rows
 from pipeline.artifacts.jsonfile import json_safe, write_json
 from pipeline.artifacts.pointers import keep_latest
-from pipeline.artifacts.stages import compared_pair, run_named_stage
+from pipeline.artifacts.stages import compared_pair
 from pipeline.artifacts.store import StageRun
-from pipeline.cli import CONF_DIR, compose, data_root, own_overrides, scale_overrides, stage_main
+from pipeline.runtime.cli import (
+    CONF_DIR,
+    compose,
+    data_root,
+    own_overrides,
+    run_named_stage,
+    scale_overrides,
+    stage_main,
+)
 from pipeline.tracking import StageLog
 
 STAGE = "unseen"
 SECTIONS = ("seed", "unseen")
-NOT_AFFECTING_RESULT = ("unseen.force", "unseen.log_images",  # the versions are upstream
-                        "unseen.train_version", "unseen.baseline_version")
+NOT_AFFECTING_RESULT = (
+    "unseen.force",
+    "unseen.log_images",  # the versions are upstream
+    "unseen.train_version",
+    "unseen.baseline_version",
+)
 TABLE1_KEYS = ("top1", "top1pct", "top5pct", "top10pct")
-PLANNER_COLORS = {"dcnn": (40, 200, 40), "gqcnn": (200, 40, 40), "gqcnn_ood": (240, 150, 40),
-                  "planarity": (120, 120, 255)}
+PLANNER_COLORS = {
+    "dcnn": (40, 200, 40),
+    "gqcnn": (200, 40, 40),
+    "gqcnn_ood": (240, 150, 40),
+    "planarity": (120, 120, 255),
+}
 
 
 def build(base: list[str], uc, data: Path, models: Path) -> dict[str, Path]:
     """Run (or reuse) every artifact the study needs; name → folder."""
     if int(uc.test_scenes) < 1:
-        raise ValueError(f"unseen.test_scenes={uc.test_scenes}: the unseen-size test split "
-                         "needs at least one heap")
+        raise ValueError(
+            f"unseen.test_scenes={uc.test_scenes}: the unseen-size test split "
+            "needs at least one heap"
+        )
     boxes_file = Path(CONF_DIR) / "boxes" / f"{uc.boxes}.yaml"
     if not boxes_file.is_file():
         choices = sorted(p.stem for p in boxes_file.parent.glob("*.yaml"))
-        raise ValueError(f"unseen.boxes={uc.boxes!r} is not a file of conf/boxes/: choose one "
-                         f"of {choices}")
+        raise ValueError(
+            f"unseen.boxes={uc.boxes!r} is not a file of conf/boxes/: choose one of {choices}"
+        )
     if int(uc.closed_loop_trials) < 0:
-        raise ValueError(f"unseen.closed_loop_trials={uc.closed_loop_trials}: give a number of "
-                         "trials, or 0 for no closed loop")
+        raise ValueError(
+            f"unseen.closed_loop_trials={uc.closed_loop_trials}: give a number of "
+            "trials, or 0 for no closed loop"
+        )
     loop_file = Path(CONF_DIR) / "eval_boxes" / f"{uc.closed_loop_boxes}.yaml"
     if int(uc.closed_loop_trials) > 0 and not loop_file.is_file():
         choices = sorted(p.stem for p in loop_file.parent.glob("*.yaml"))
-        raise ValueError(f"unseen.closed_loop_boxes={uc.closed_loop_boxes!r} is not a file of "
-                         f"conf/eval_boxes/: choose one of {choices}")
+        raise ValueError(
+            f"unseen.closed_loop_boxes={uc.closed_loop_boxes!r} is not a file of "
+            f"conf/eval_boxes/: choose one of {choices}"
+        )
     # The planners under test: the trained network and the baseline artifact that compared it
-    # (``make train``, ``make baseline``; ``latest`` unless named), as the evaluate stage reads them.
+    # (``make train``, ``make baseline``; ``latest`` unless named), as the evaluate stage reads
+    # them.
     dirs = compared_pair(data, models, uc.train_version, uc.baseline_version, STAGE)
 
     def run(key: str, stage: str, extra: list[str]) -> Path:
@@ -98,36 +124,54 @@ def build(base: list[str], uc, data: Path, models: Path) -> dict[str, Path]:
 
     # The unseen heaps, which must not become ``latest``.
     with keep_latest([data / "generate", data / "label", data / "evaluate"]):
-        gen_u = run("generate_unseen", "generate", [
-            f"boxes={uc.boxes}", "generate.num_scenes=0", "generate.num_val_scenes=0",
-            f"generate.num_test_scenes={int(uc.test_scenes)}"])
+        gen_u = run(
+            "generate_unseen",
+            "generate",
+            [
+                f"boxes={uc.boxes}",
+                "generate.num_scenes=0",
+                "generate.num_val_scenes=0",
+                f"generate.num_test_scenes={int(uc.test_scenes)}",
+            ],
+        )
         run("label_unseen", "label", [f"label.generate_version={gen_u.name}"])
         if int(uc.closed_loop_trials) > 0:
-            run("evaluate_unseen", "evaluate", [
-                f"eval_boxes={uc.closed_loop_boxes}", "evaluate.split=test",
-                f"evaluate.num_trials={int(uc.closed_loop_trials)}",
-                f"evaluate.train_version={dirs['train'].name}",
-                f"evaluate.baseline_version={dirs['baseline'].name}"])
+            run(
+                "evaluate_unseen",
+                "evaluate",
+                [
+                    f"eval_boxes={uc.closed_loop_boxes}",
+                    "evaluate.split=test",
+                    f"evaluate.num_trials={int(uc.closed_loop_trials)}",
+                    f"evaluate.train_version={dirs['train'].name}",
+                    f"evaluate.baseline_version={dirs['baseline'].name}",
+                ],
+            )
     return dirs
 
 
 def table1_row(name: str, res: dict) -> dict:
     """One Table 1 row (fractions, 6 decimals) of a ``precision_table`` result."""
+
     def r6(v):
         return None if v is None else round(float(v), 6)
-    return {"set": name, **{k: r6(res.get(k)) for k in TABLE1_KEYS},
-            **{f"per_image_{k}": r6((res.get("per_image") or {}).get(k))
-               for k in TABLE1_KEYS[1:]},
-            "threshold": res.get("threshold"), "predictions": res.get("num_predictions"),
-            "scored_images": res.get("scored_images"),
-            "no_prediction_images": res.get("no_prediction_images")}
+
+    return {
+        "set": name,
+        **{k: r6(res.get(k)) for k in TABLE1_KEYS},
+        **{f"per_image_{k}": r6((res.get("per_image") or {}).get(k)) for k in TABLE1_KEYS[1:]},
+        "threshold": res.get("threshold"),
+        "predictions": res.get("num_predictions"),
+        "scored_images": res.get("scored_images"),
+        "no_prediction_images": res.get("no_prediction_images"),
+    }
 
 
 def unseen_tables(cfg, dirs: dict[str, Path], progress: bool) -> tuple[list, list, dict]:
     """Table 1 and Table 2 rows (seen from the manifests, unseen measured here) and each
     planner's G_opt on the unseen test images."""
-    from pipeline.dexnet.table2 import evaluate_table2, table2_rows
     from pipeline.dataset.labels import LabelSet
+    from pipeline.dexnet.table2 import evaluate_table2, table2_rows
     from pipeline.planner.data import GraspDataset
     from pipeline.planner.planner import Planner
     from pipeline.planner.scoring import table1
@@ -135,16 +179,19 @@ def unseen_tables(cfg, dirs: dict[str, Path], progress: bool) -> tuple[list, lis
     base = scale_overrides(cfg, None)
     radius_t1 = float(compose("train", base).train.match_radius_px)
     planner = Planner.load(dirs["train"])
-    data = GraspDataset(dirs["generate_unseen"], LabelSet(dirs["label_unseen"], "test"), "test",
-                        planner.norm, planner.net.cfg.grid)
+    data = GraspDataset(
+        dirs["generate_unseen"],
+        LabelSet(dirs["label_unseen"], "test"),
+        "test",
+        planner.norm,
+        planner.net.cfg.grid,
+    )
     seen_t1 = load_manifest(dirs["train"])["metrics"]["table1"]
-    t1 = [table1_row("seen", seen_t1),
-          table1_row("unseen", table1(planner, data, radius_t1))]
+    t1 = [table1_row("seen", seen_t1), table1_row("unseen", table1(planner, data, radius_t1))]
 
     bcfg = compose("baseline", base)
     radius = float(bcfg.baseline.table2_radius_px)
-    res = evaluate_table2(bcfg, dirs["generate_unseen"], dirs["baseline"], dirs["train"],
-                          progress)
+    res = evaluate_table2(bcfg, dirs["generate_unseen"], dirs["baseline"], dirs["train"], progress)
     seen_rows = load_manifest(dirs["baseline"])["metrics"]["table2"]["rows"]
     t2 = [{"set": "seen", **r} for r in seen_rows]
     t2 += [{"set": "unseen", **r} for r in table2_rows(res, radius, np.array([radius]))[0]]
@@ -175,8 +222,9 @@ def _log(log: StageLog, gen_dir: Path, picks: dict, count: int, tables: dict) ->
         for planner, uv in picks.items():
             if i < len(uv) and np.isfinite(uv[i]).all():
                 color = np.asarray([PLANNER_COLORS.get(planner, (255, 255, 255))], np.uint8)
-                log.log_points(f"unseen/camera/g_opt/{planner}",
-                               pixels_to_points(scene, uv[i]), color)
+                log.log_points(
+                    f"unseen/camera/g_opt/{planner}", pixels_to_points(scene, uv[i]), color
+                )
         log.log_text("log", f"unseen test image {i}: {len(scene.boxes)} boxes")
     for key in ("table1", "table2"):
         for row in tables[key]:
@@ -202,18 +250,27 @@ def unseen(cfg: DictConfig, overrides: list[str] | None = None) -> Path:
         if "evaluate_unseen" in dirs:
             write_rows(run.work_dir / "closed_loop.csv", loop, empty_header=("planner",))
             write_rows(run.work_dir / "drops_by_mass.csv", drops, empty_header=("planner",))
-        tables = json_safe({"table1": t1, "table2": t2, "artifacts": upstream,
-                            "boxes": [{"name": str(b.name), "size": [float(x) for x in b.size]}
-                                      for b in boxes.types],
-                            "closed_loop": loop, "drops_by_mass": drops})
+        tables = json_safe(
+            {
+                "table1": t1,
+                "table2": t2,
+                "artifacts": upstream,
+                "boxes": [
+                    {"name": str(b.name), "size": [float(x) for x in b.size]} for b in boxes.types
+                ],
+                "closed_loop": loop,
+                "drops_by_mass": drops,
+            }
+        )
         write_json(run.work_dir / "unseen.json", tables)
-        run.metrics.update({k: tables[k] for k in ("table1", "table2", "boxes", "closed_loop",
-                                                     "drops_by_mass")})
+        run.metrics.update(
+            {k: tables[k] for k in ("table1", "table2", "boxes", "closed_loop", "drops_by_mass")}
+        )
         with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version) as log:
             _log(log, dirs["generate_unseen"], picks, int(uc.log_images), tables)
 
-    return run_stage(data_root(cfg), STAGE, version, config, upstream, body,
-                     seed=int(cfg.seed), force=bool(uc.force))
+    seed, force = int(cfg.seed), bool(uc.force)
+    return run_stage(data_root(cfg), STAGE, version, config, upstream, body, seed=seed, force=force)
 
 
 @hydra.main(config_path=CONF_DIR, config_name="unseen", version_base="1.3")

@@ -7,7 +7,7 @@ that reports a difference, row by row regardless of chunking (``rrd_rows_equal``
 manifest lists in ``metrics.volatile_files`` (measured wall-clock times, e.g. the report's
 ``tables/planning_time.csv``) are skipped, and the skip is printed.
 
-    python -m pipeline.repro_check [--keep] [--workdir DIR]
+    python -m pipeline.tools.repro_check [--keep] [--workdir DIR]
 
 Exit status 0 when everything matches, 1 on any difference (each one is printed).
 """
@@ -21,14 +21,14 @@ import sys
 import tempfile
 from pathlib import Path
 
+from pipeline.artifacts.fingerprint import stage_module
 from pipeline.artifacts.store import load_manifest, resolve_artifact
+from pipeline.runtime.cli import REPRODUCE_STAGES
+from pipeline.tools.view import MODEL_STAGES
 from pipeline.tracking import rrd_equal
-from pipeline.view import MODEL_STAGES
 
-# The smoke pipeline, in order; later issues append their stages here.
-STAGES = ("generate", "label", "train", "baseline", "evaluate", "unseen", "ablation", "robustness",
-          "report")
-
+# The smoke pipeline, in order.
+STAGES = (*REPRODUCE_STAGES, "report")
 
 
 def rrd_rows(path: Path) -> list[str]:
@@ -45,8 +45,11 @@ def rrd_rows(path: Path) -> list[str]:
         names = [n for n in batch.schema.names if "RowId" not in n]
         cols = {n: batch.column(batch.schema.get_field_index(n)).to_pylist() for n in names}
         for k in range(batch.num_rows):
-            row = json.dumps([chunk.entity_path, chunk.is_static,
-                              {n: cols[n][k] for n in names}], sort_keys=True, default=str)
+            row = json.dumps(
+                [chunk.entity_path, chunk.is_static, {n: cols[n][k] for n in names}],
+                sort_keys=True,
+                default=str,
+            )
             rows.append(hashlib.sha256(row.encode()).hexdigest())
     return sorted(rows)
 
@@ -59,18 +62,26 @@ def rrd_rows_equal(a: Path, b: Path) -> bool:
 
 def _rrd_compare_output(a: Path, b: Path) -> str:
     """The last lines of ``rerun rrd compare``'s output, to say what differs."""
-    from pipeline.view import rerun_executable
+    from pipeline.tools.view import rerun_executable
 
-    res = subprocess.run([rerun_executable(), "rrd", "compare", str(a), str(b)],
-                         capture_output=True, text=True)
+    res = subprocess.run(
+        [rerun_executable(), "rrd", "compare", str(a), str(b)], capture_output=True, text=True
+    )
     text = (res.stdout + res.stderr).strip().splitlines()
     return " | ".join(text[-3:]) if text else f"exit status {res.returncode}"
 
 
 def run_pipeline(root: Path, extra: list[str]) -> None:
     for stage in STAGES:
-        cmd = [sys.executable, "-m", f"pipeline.{stage}", "experiment=smoke",
-               f"paths.root={root}", "logging.progress=false", *extra]
+        cmd = [
+            sys.executable,
+            "-m",
+            stage_module(stage),
+            "experiment=smoke",
+            f"paths.root={root}",
+            "logging.progress=false",
+            *extra,
+        ]
         print("$", " ".join(cmd), flush=True)
         subprocess.run(cmd, check=True)
 
@@ -91,8 +102,10 @@ def compare_artifacts(stage: str, a: Path, b: Path) -> list[str]:
             diffs.append(f"{stage}/{rel}: present in only one run")
         elif rel.endswith(".rrd"):
             if not rrd_equal(a / rel, b / rel) and not rrd_rows_equal(a / rel, b / rel):
-                diffs.append(f"{stage}/{rel}: Rerun recordings differ (rerun rrd compare: "
-                             f"{_rrd_compare_output(a / rel, b / rel)})")
+                diffs.append(
+                    f"{stage}/{rel}: Rerun recordings differ (rerun rrd compare: "
+                    f"{_rrd_compare_output(a / rel, b / rel)})"
+                )
         elif fa[rel]["sha256"] != fb[rel]["sha256"]:
             diffs.append(f"{stage}/{rel}: sha256 differs")
     print(f"[repro-check] {stage} {a.name}: {len(fa)} files compared")
@@ -104,8 +117,14 @@ def _versions(stage_dir: Path) -> list[str]:
     stage: the clean and the noisy pipeline, one evaluation per variant)."""
     if not stage_dir.is_dir():
         return []
-    return sorted(d.name for d in stage_dir.iterdir() if d.is_dir() and not d.is_symlink()
-                  and not d.name.startswith(".") and (d / "manifest.json").is_file())
+    return sorted(
+        d.name
+        for d in stage_dir.iterdir()
+        if d.is_dir()
+        and not d.is_symlink()
+        and not d.name.startswith(".")
+        and (d / "manifest.json").is_file()
+    )
 
 
 def compare(root_a: Path, root_b: Path) -> list[str]:
@@ -120,15 +139,22 @@ def compare(root_a: Path, root_b: Path) -> list[str]:
         if not va:
             diffs.append(f"{stage}: no artifact in the first run")
         for version in sorted(set(va) & set(vb)):
-            diffs += compare_artifacts(stage, resolve_artifact(root_a / top, stage, version),
-                                       resolve_artifact(root_b / top, stage, version))
+            diffs += compare_artifacts(
+                stage,
+                resolve_artifact(root_a / top, stage, version),
+                resolve_artifact(root_b / top, stage, version),
+            )
     return diffs
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--workdir", type=Path, default=None,
-                        help="where to put the two runs (default: a temporary folder)")
+    parser.add_argument(
+        "--workdir",
+        type=Path,
+        default=None,
+        help="where to put the two runs (default: a temporary folder)",
+    )
     parser.add_argument("--keep", action="store_true", help="keep the two runs' folders")
     parser.add_argument("overrides", nargs="*", help="extra Hydra overrides for every stage")
     args = parser.parse_args(argv)

@@ -1,7 +1,7 @@
 """Re-hash every artifact under ``data/`` and ``models/`` against its manifest.
 
-    python -m pipeline.verify                 # everything under the repository (or $BINPICK_ROOT)
-    python -m pipeline.verify --root /tmp/r1  # another paths.root
+    python -m pipeline.tools.verify                 # all under the repository or $BINPICK_ROOT
+    python -m pipeline.tools.verify --root /tmp/r1  # another paths.root
 
 Exit status 0 when every file matches, 1 when any file is missing, changed or unlisted.
 """
@@ -17,7 +17,7 @@ from pipeline.artifacts.store import MANIFEST, verify_artifact
 
 
 def find_artifacts(root: Path) -> list[Path]:
-    """Folders holding a manifest under ``root/data`` and ``root/models`` (temporary ones excluded)."""
+    """Folders holding a manifest under ``root/data`` and ``root/models`` (not temporary ones)."""
     found = []
     for top in (root / "data", root / "models"):
         if not top.is_dir():
@@ -26,7 +26,9 @@ def find_artifacts(root: Path) -> list[Path]:
             folder = manifest.parent
             if any(part.startswith(".") for part in folder.relative_to(top).parts):
                 continue
-            if folder.is_symlink() or any(p.is_symlink() for p in folder.parents if top in p.parents):
+            if folder.is_symlink() or any(
+                p.is_symlink() for p in folder.parents if top in p.parents
+            ):
                 continue
             found.append(folder)
     return found
@@ -40,9 +42,12 @@ def main(argv: list[str] | None = None) -> int:
     import os
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--root", type=Path,
-                        default=Path(os.environ.get("BINPICK_ROOT", REPO_ROOT)),
-                        help="the paths.root holding data/ and models/")
+    parser.add_argument(
+        "--root",
+        type=Path,
+        default=Path(os.environ.get("BINPICK_ROOT", REPO_ROOT)),
+        help="the paths.root holding data/ and models/",
+    )
     args = parser.parse_args(argv)
     results = verify_all(args.root)
     if not results:
@@ -58,8 +63,10 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"     {problem}")
         else:
             print(f"ok   {rel}")
-    print(f"{len(results) - bad} of {len(results)} artifacts verified"
-          + (f"; {bad} failed: recompute them with <stage>.force=true" if bad else ""))
+    print(
+        f"{len(results) - bad} of {len(results)} artifacts verified"
+        + (f"; {bad} failed: recompute them with <stage>.force=true" if bad else "")
+    )
     return 1 if bad else 0
 
 

@@ -13,7 +13,7 @@ uninterrupted run's (the manifest's ``timings`` and ``created`` aside).
 
 Command line::
 
-    python -m pipeline.generate experiment=smoke generate.num_scenes=200 generate.workers=2
+    python -m pipeline.stages.generate experiment=smoke generate.num_scenes=200 generate.workers=2
 """
 
 from __future__ import annotations
@@ -31,15 +31,18 @@ from omegaconf import DictConfig, OmegaConf
 from pipeline.artifacts import compute_version, run_stage, stage_config
 from pipeline.artifacts.store import StageRun
 from pipeline.camera.geometry import (
-    Intrinsics, camera_pose_above_bin, pose_matrix, quat_from_matrix,
+    Intrinsics,
+    camera_pose_above_bin,
+    pose_matrix,
+    quat_from_matrix,
 )
 from pipeline.camera.randomise import check_randomisation, draw_sensor, randomisation_rng
 from pipeline.camera.render import check_renderer
 from pipeline.camera.sensor import apply_sensor_model
-from pipeline.cli import CONF_DIR, data_root, stage_main
 from pipeline.dataset.scenes import SPLIT_CODES, SPLITS, SceneDataset
-from pipeline.dataset.storage import read_npz, write_npz
-from pipeline.executor import log_quota, map_shards, resolve_workers
+from pipeline.dataset.storage import read_npz, shard_index, write_npz
+from pipeline.runtime.cli import CONF_DIR, data_root, stage_main
+from pipeline.runtime.executor import log_quota, map_shards, resolve_workers
 from pipeline.simulation.cartons import check_cartons
 from pipeline.simulation.scene import connect, scene_rng, simulate_scene
 from pipeline.tracking import StageLog, default_blueprint
@@ -85,8 +88,9 @@ def plan_shards(gcfg, out_dir: Path) -> list[ShardTask]:
         for k in range(math.ceil(n / gcfg.scenes_per_shard)):
             first = k * gcfg.scenes_per_shard
             count = min(gcfg.scenes_per_shard, n - first)
-            tasks.append(ShardTask(split, k, first, count,
-                                   str(out_dir / "scenes" / f"{split}-{k:05d}.npz")))
+            tasks.append(
+                ShardTask(split, k, first, count, str(out_dir / "scenes" / f"{split}-{k:05d}.npz"))
+            )
     return tasks
 
 
@@ -108,20 +112,39 @@ def generate_shard(task: ShardTask) -> ShardSummary:
     T_cam_world = np.linalg.inv(T_world_cam)
     unit = cfg.generate.depth_unit
     max_depth = 65535 * unit
-    cols: dict[str, list] = {k: [] for k in (
-        "depth", "depth_clean", "mask", "scene_index", "seed", "num_boxes", "num_dropped", "num_removed",
-        "settle_steps", "settled", "box_type", "box_size", "box_mass", "box_T_world", "box_T_cam")}
+    cols: dict[str, list] = {
+        k: []
+        for k in (
+            "depth",
+            "depth_clean",
+            "mask",
+            "scene_index",
+            "seed",
+            "num_boxes",
+            "num_dropped",
+            "num_removed",
+            "settle_steps",
+            "settled",
+            "box_type",
+            "box_size",
+            "box_mass",
+            "box_T_world",
+            "box_T_cam",
+        )
+    }
     rand = cfg.generate.camera_randomisation
     randomised = bool(rand.enabled) and task.split in rand.splits
     keep_clean = stores_clean_depth(cfg)
     intr = Intrinsics.from_config(cfg.camera)
     cartons = cfg.boxes.cartons is not None and task.split in cfg.generate.carton_splits
-    jitter = (cfg.generate.size_jitter
-              if task.split in cfg.generate.size_jitter_splits and not cartons else 0.0)
+    jitter = (
+        cfg.generate.size_jitter
+        if task.split in cfg.generate.size_jitter_splits and not cartons
+        else 0.0
+    )
     for index in range(task.first, task.first + task.count):
         seed = (cfg.seed, SPLIT_CODES[task.split], index)
-        scene = simulate_scene(_CLIENT, cfg, scene_rng(*seed), size_jitter=jitter,
-                               cartons=cartons)
+        scene = simulate_scene(_CLIENT, cfg, scene_rng(*seed), size_jitter=jitter, cartons=cartons)
         depth = scene.depth_m
         if randomised:
             r_rng = randomisation_rng(*seed)
@@ -129,8 +152,10 @@ def generate_shard(task: ShardTask) -> ShardSummary:
             if sensor is not None:
                 depth = apply_sensor_model(scene.depth_clean_m, sensor, r_rng, intr)
         if float(depth.max(initial=0.0)) > max_depth:
-            raise ValueError(f"depth beyond {max_depth:.2f} m cannot be stored with "
-                             f"generate.depth_unit={unit}; increase the unit")
+            raise ValueError(
+                f"depth beyond {max_depth:.2f} m cannot be stored with "
+                f"generate.depth_unit={unit}; increase the unit"
+            )
         cols["depth"].append(np.round(depth / unit).astype(np.uint16))
         if keep_clean:  # the ideal depth too: labels and clean-input baselines
             cols["depth_clean"].append(np.round(scene.depth_clean_m / unit).astype(np.uint16))
@@ -171,8 +196,14 @@ def generate_shard(task: ShardTask) -> ShardSummary:
     assert arrays["depth"].shape == (task.count, H, W)
     Path(task.path).parent.mkdir(parents=True, exist_ok=True)
     write_npz(Path(task.path), arrays)
-    return ShardSummary(task, arrays["num_boxes"], arrays["num_removed"],
-                        arrays["settle_steps"], arrays["settled"], time.perf_counter() - t0)
+    return ShardSummary(
+        task,
+        arrays["num_boxes"],
+        arrays["num_removed"],
+        arrays["settle_steps"],
+        arrays["settled"],
+        time.perf_counter() - t0,
+    )
 
 
 def shard_from_file(task: ShardTask) -> ShardSummary | None:
@@ -184,47 +215,85 @@ def shard_from_file(task: ShardTask) -> ShardSummary | None:
     try:
         arrays = read_npz(path)  # reads every member: a damaged file fails its CRC check
         ok = np.array_equal(arrays["scene_index"], np.arange(task.first, task.first + task.count))
-        summary = ShardSummary(task, arrays["num_boxes"], arrays["num_removed"],
-                               arrays["settle_steps"], arrays["settled"], 0.0)
-    except Exception:  # noqa: BLE001 - any unusable file is simply computed again
+        summary = ShardSummary(
+            task,
+            arrays["num_boxes"],
+            arrays["num_removed"],
+            arrays["settle_steps"],
+            arrays["settled"],
+            0.0,
+        )
+    except Exception:
         return None
     return summary if ok else None
 
 
 def run_shards(tasks: list[ShardTask], cfg_obj, workers: int, progress: bool = True):
     """Yield each shard's summary in task order, computed by ``workers`` processes."""
-    return map_shards(generate_shard, tasks, init=_init_worker, initargs=(cfg_obj,),
-                      workers=workers, desc=STAGE, progress=progress,
-                      executor=cfg_obj.executor)
+    return map_shards(
+        generate_shard,
+        tasks,
+        init=_init_worker,
+        initargs=(cfg_obj,),
+        workers=workers,
+        desc=STAGE,
+        progress=progress,
+        executor=cfg_obj.executor,
+    )
 
 
 def _log_static(log: StageLog, cfg_obj) -> None:
     b = cfg_obj.bin
     t, ft = b.wall_thickness, b.floor_thickness
     lx, ly, h = b.inner_length_x, b.inner_width_y, b.wall_height
-    centers = [[0, 0, -ft / 2], [-(lx + t) / 2, 0, (h - ft) / 2], [(lx + t) / 2, 0, (h - ft) / 2],
-               [0, -(ly + t) / 2, (h - ft) / 2], [0, (ly + t) / 2, (h - ft) / 2]]
-    sizes = [[lx + 2 * t, ly + 2 * t, ft], [t, ly + 2 * t, h + ft], [t, ly + 2 * t, h + ft],
-             [lx, t, h + ft], [lx, t, h + ft]]
-    log.log_static_boxes("world/bin", np.asarray(centers, float), np.asarray(sizes, float),
-                         np.tile([0.0, 0.0, 0.0, 1.0], (5, 1)), labels=["floor"] + ["wall"] * 4)
+    centers = [
+        [0, 0, -ft / 2],
+        [-(lx + t) / 2, 0, (h - ft) / 2],
+        [(lx + t) / 2, 0, (h - ft) / 2],
+        [0, -(ly + t) / 2, (h - ft) / 2],
+        [0, (ly + t) / 2, (h - ft) / 2],
+    ]
+    sizes = [
+        [lx + 2 * t, ly + 2 * t, ft],
+        [t, ly + 2 * t, h + ft],
+        [t, ly + 2 * t, h + ft],
+        [lx, t, h + ft],
+        [lx, t, h + ft],
+    ]
+    log.log_static_boxes(
+        "world/bin",
+        np.asarray(centers, float),
+        np.asarray(sizes, float),
+        np.tile([0.0, 0.0, 0.0, 1.0], (5, 1)),
+        labels=["floor"] + ["wall"] * 4,
+    )
 
 
 def _log_scene(log: StageLog, scene, log_index: int, dt: float) -> None:
-    log.set_time(sequences={"scene": log_index},
-                 durations_s={"sim_time": scene.settle_steps * dt},
-                 clock_ns=log_index * 1_000_000_000)
+    log.set_time(
+        sequences={"scene": log_index},
+        durations_s={"sim_time": scene.settle_steps * dt},
+        clock_ns=log_index * 1_000_000_000,
+    )
     log.log_camera("world/camera", scene.intrinsics, scene.T_world_cam)
     log.log_depth("world/camera/depth", scene.depth_m)
     log.log_segmentation("world/camera/mask", scene.mask)
     centers = np.array([b.T_world_box[:3, 3] for b in scene.boxes]).reshape(-1, 3)
     sizes = np.array([b.size for b in scene.boxes]).reshape(-1, 3)
     quats = np.array([quat_from_matrix(b.T_world_box[:3, :3]) for b in scene.boxes]).reshape(-1, 4)
-    log.log_boxes("world/boxes", centers, sizes, quats,
-                  labels=[f"{b.instance}:{b.type_name}" for b in scene.boxes])
+    log.log_boxes(
+        "world/boxes",
+        centers,
+        sizes,
+        quats,
+        labels=[f"{b.instance}:{b.type_name}" for b in scene.boxes],
+    )
     log.log_scalar("metrics/boxes_per_scene", float(len(scene.boxes)))
-    log.log_text("log", f"{scene.split} scene {scene.index}: {len(scene.boxes)} boxes at rest "
-                        f"after {scene.settle_steps} steps (seed {scene.seed})")
+    log.log_text(
+        "log",
+        f"{scene.split} scene {scene.index}: {len(scene.boxes)} boxes at rest "
+        f"after {scene.settle_steps} steps (seed {scene.seed})",
+    )
 
 
 def _metrics(summaries: list[ShardSummary], sizes: dict[str, int], max_count: int) -> dict:
@@ -267,8 +336,10 @@ def box_types_meta(cfg) -> list[dict]:
 def check_size_jitter(gcfg) -> None:
     """``generate.size_jitter`` in [0, 1) and ``generate.size_jitter_splits`` names splits."""
     if not 0 <= float(gcfg.size_jitter) < 1:
-        raise ValueError(f"generate.size_jitter must be in [0, 1) (a fraction of each edge), got "
-                         f"{gcfg.size_jitter}; 0 keeps the box types' exact sizes")
+        raise ValueError(
+            f"generate.size_jitter must be in [0, 1) (a fraction of each edge), got "
+            f"{gcfg.size_jitter}; 0 keeps the box types' exact sizes"
+        )
     check_splits("generate.size_jitter_splits", gcfg.size_jitter_splits)
 
 
@@ -291,8 +362,9 @@ def generate(cfg: DictConfig) -> Path:
     check_splits("generate.carton_splits", cfg_obj.generate.carton_splits)
     if cfg_obj.boxes.cartons is not None:
         check_cartons(cfg_obj.boxes.cartons)
-    check_splits("generate.camera_randomisation.splits",
-                 cfg_obj.generate.camera_randomisation.splits)
+    check_splits(
+        "generate.camera_randomisation.splits", cfg_obj.generate.camera_randomisation.splits
+    )
     check_randomisation(cfg_obj.generate.camera_randomisation)
     check_renderer(cfg_obj.camera.renderer)
     workers = resolve_workers(cfg_obj.generate.workers, cfg_obj.executor)
@@ -301,28 +373,10 @@ def generate(cfg: DictConfig) -> Path:
         tasks = plan_shards(cfg_obj.generate, run.work_dir)
         # an interrupted run's finished shards are kept; everything else is redone
         done: dict[ShardTask, ShardSummary] = run.finished_shards(
-            tasks, [t.path for t in tasks], shard_from_file, lambda t: t.path)
+            tasks, [t.path for t in tasks], shard_from_file, lambda t: t.path
+        )
 
-        intr = Intrinsics.from_config(cfg_obj.camera)
-        T_world_cam = camera_pose_above_bin(cfg_obj.camera.height_above_bin_floor)
-        (run.work_dir / "camera.json").write_text(json.dumps({
-            "intrinsics": intr.as_dict(),
-            "T_world_cam": T_world_cam.tolist(),
-            "depth_unit": cfg_obj.generate.depth_unit,
-            "renderer": cfg_obj.camera.renderer,  # how the ideal depth was rendered
-            # the sensor model of `depth`; with one, shards also hold the ideal `depth_clean`
-            "sensor": OmegaConf.to_container(cfg.sensor, resolve=True),
-            "frames": {"camera": "OpenCV: x right, y down, z forward; metres",
-                       "world": "z up; origin at the centre of the bin floor's top surface"},
-            "bin": OmegaConf.to_container(cfg.bin, resolve=True),
-            "box_types": box_types_meta(cfg),
-        }, indent=2) + "\n")
-        index = {"splits": {s: [] for s in SPLITS}}
-        for t in tasks:
-            index["splits"][t.split].append({
-                "file": Path(t.path).relative_to(run.work_dir).as_posix(),
-                "first": t.first, "count": t.count})
-        (run.work_dir / "index.json").write_text(json.dumps(index, indent=2) + "\n")
+        _write_meta(run, cfg, cfg_obj, tasks)
 
         t0 = time.perf_counter()
         todo = [t for t in tasks if t not in done]
@@ -337,8 +391,12 @@ def generate(cfg: DictConfig) -> Path:
 
         t1 = time.perf_counter()
         quota = log_quota(sizes, cfg_obj.logging.max_logged_scenes)
-        with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version,
-                      blueprint=default_blueprint()) as log:
+        with StageLog(
+            run.work_dir,
+            app_id=f"binpick-{STAGE}",
+            recording_id=run.version,
+            blueprint=default_blueprint(),
+        ) as log:
             _log_static(log, cfg_obj)
             log_index = 0
             for split in SPLITS:
@@ -350,8 +408,40 @@ def generate(cfg: DictConfig) -> Path:
         run.metrics.update(_metrics(summaries, sizes, cfg_obj.boxes.max_count))
         run.metrics["logged_scenes"] = log_index
 
-    return run_stage(data_root(cfg), STAGE, version, config, {}, body,
-                     seed=cfg_obj.seed, force=cfg_obj.generate.force, resumable=True)
+    seed, force = cfg_obj.seed, cfg_obj.generate.force
+    return run_stage(
+        data_root(cfg), STAGE, version, config, {}, body, seed=seed, force=force, resumable=True
+    )
+
+
+def _write_meta(run: StageRun, cfg: DictConfig, cfg_obj, tasks: list[ShardTask]) -> None:
+    """``camera.json`` (intrinsics, camera pose, depth unit, renderer, sensor, frames, bin, box
+    types) and ``index.json`` (the shards of each split)."""
+    intr = Intrinsics.from_config(cfg_obj.camera)
+    T_world_cam = camera_pose_above_bin(cfg_obj.camera.height_above_bin_floor)
+    (run.work_dir / "camera.json").write_text(
+        json.dumps(
+            {
+                "intrinsics": intr.as_dict(),
+                "T_world_cam": T_world_cam.tolist(),
+                "depth_unit": cfg_obj.generate.depth_unit,
+                "renderer": cfg_obj.camera.renderer,  # how the ideal depth was rendered
+                # the sensor model of `depth`; with one, shards also hold the ideal
+                # `depth_clean`
+                "sensor": OmegaConf.to_container(cfg.sensor, resolve=True),
+                "frames": {
+                    "camera": "OpenCV: x right, y down, z forward; metres",
+                    "world": "z up; origin at the centre of the bin floor's top surface",
+                },
+                "bin": OmegaConf.to_container(cfg.bin, resolve=True),
+                "box_types": box_types_meta(cfg),
+            },
+            indent=2,
+        )
+        + "\n"
+    )
+    index = {"splits": shard_index(tasks, run.work_dir, SPLITS, lambda t: t.path)}
+    (run.work_dir / "index.json").write_text(json.dumps(index, indent=2) + "\n")
 
 
 @hydra.main(config_path=CONF_DIR, config_name="generate", version_base="1.3")

@@ -1,6 +1,6 @@
 """Measured figures of the DCNN on a CUDA GPU: planning and training speed, CPU agreement.
 
-    python -m pipeline.bench_gpu [--widths 0.125 1.0] [--steps 20]
+    python -m pipeline.tools.bench_gpu [--widths 0.125 1.0] [--steps 20]
     make bench ARGS="--only gpu"
 
 Needs a CUDA device (it says so and exits 2 without one). Prints, for the default network and
@@ -38,11 +38,11 @@ import time
 import numpy as np
 import torch
 
-from pipeline.cli import compose
 from pipeline.planner.loss import grasp_loss, loss_config
 from pipeline.planner.network import GraspNet, network_config
 from pipeline.planner.numerics import set_training_numerics
 from pipeline.planner.targets import encode, stack_targets
+from pipeline.runtime.cli import compose
 
 MODES = ("stage", "tf32", "autotuned")
 
@@ -53,8 +53,12 @@ def random_training_batch(batch: int, size: int, grid: int, seed: int = 0):
     benchmarks (this module's and ``bench.training_images_per_s``) train on."""
     rng = np.random.default_rng(seed)
     x = torch.from_numpy(rng.normal(0.0, 1.0, (batch, 1, size, size)).astype(np.float32))
-    targets = stack_targets([encode(rng.uniform(0, size - 1, (10, 2)), rng.integers(0, 4, 10),
-                                    grid, size) for _ in range(batch)])
+    targets = stack_targets(
+        [
+            encode(rng.uniform(0, size - 1, (10, 2)), rng.integers(0, 4, 10), grid, size)
+            for _ in range(batch)
+        ]
+    )
     return x, targets
 
 
@@ -133,8 +137,7 @@ def agreement(cfg, width: float, steps: int) -> dict[str, float]:
     settings."""
     net_cfg = dataclasses.replace(network_config(cfg), width=width)
     loss_cfg, lr = loss_config(cfg), float(cfg.train.lr)
-    x, targets = random_training_batch(int(cfg.train.batch_size), net_cfg.input_size,
-                                       net_cfg.grid)
+    x, targets = random_training_batch(int(cfg.train.batch_size), net_cfg.input_size, net_cfg.grid)
     torch.manual_seed(0)
     weights = GraspNet(net_cfg).state_dict()
 
@@ -149,8 +152,11 @@ def agreement(cfg, width: float, steps: int) -> dict[str, float]:
 
     loss64, grad64 = first_step("cpu", torch.float64)
     out = {"loss_float64_cpu": loss64, "grad_norm_float64_cpu": float(grad64.norm())}
-    for key, device, mode in (("cpu", "cpu", "stage"), ("cuda_stage", "cuda", "stage"),
-                              ("cuda_tf32", "cuda", "tf32")):
+    for key, device, mode in (
+        ("cpu", "cpu", "stage"),
+        ("cuda_stage", "cuda", "stage"),
+        ("cuda_tf32", "cuda", "tf32"),
+    ):
         _settings(mode)
         loss, grad = first_step(device, torch.float32)
         out[f"loss_rel_err_{key}"] = abs(loss - loss64) / abs(loss64)
@@ -167,52 +173,80 @@ def agreement(cfg, width: float, steps: int) -> dict[str, float]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--widths", type=float, nargs="+", default=None,
-                        help="network widths (default: the `default` experiment's and 1.0)")
+    parser.add_argument(
+        "--widths",
+        type=float,
+        nargs="+",
+        default=None,
+        help="network widths (default: the `default` experiment's and 1.0)",
+    )
     parser.add_argument("--steps", type=int, default=20, help="timed training steps per figure")
     args = parser.parse_args(argv)
     if not torch.cuda.is_available():
-        print("bench_gpu: torch sees no CUDA device; run it on a machine with an NVIDIA GPU "
-              "(the CPU figures are `make bench`'s other groups)", file=sys.stderr)
+        print(
+            "bench_gpu: torch sees no CUDA device; run it on a machine with an NVIDIA GPU "
+            "(the CPU figures are `make bench`'s other groups)",
+            file=sys.stderr,
+        )
         return 2
     cfg = compose("train", ["experiment=default"])
     paper = compose("train", ["experiment=paper"])
     widths = args.widths or [float(cfg.model.width), float(paper.model.width)]
     paper_train_images = int(paper.generate.num_scenes)
-    print(f"device: {torch.cuda.get_device_name()}, torch {torch.__version__}, "
-          f"CUDA {torch.version.cuda}, cuDNN {torch.backends.cudnn.version()}")
+    print(
+        f"device: {torch.cuda.get_device_name()}, torch {torch.__version__}, "
+        f"CUDA {torch.version.cuda}, cuDNN {torch.backends.cudnn.version()}"
+    )
     results: dict = {"device": torch.cuda.get_device_name(), "torch": torch.__version__}
     for width in widths:
         net_cfg = dataclasses.replace(network_config(cfg), width=width)
         params = sum(p.numel() for p in GraspNet(net_cfg).parameters())
-        fig = {"params_m": params / 1e6, "planning_tf32_ms": planning_ms(net_cfg, "tf32"),
-               "planning_fp32_ms": planning_ms(net_cfg, "stage")}
+        fig = {
+            "params_m": params / 1e6,
+            "planning_tf32_ms": planning_ms(net_cfg, "tf32"),
+            "planning_fp32_ms": planning_ms(net_cfg, "stage"),
+        }
         fig.update(training_figures(cfg, width, args.steps))
         fig["paper_epoch_min_stage"] = paper_train_images / fig["train_stage_images_per_s"] / 60
         results[f"width_{width}"] = fig
         print(f"width {width} ({fig['params_m']:.2f} M parameters):")
-        print(f"  planning, one image through the network: {fig['planning_tf32_ms']:.2f} ms "
-              f"(TF32, PyTorch's default), {fig['planning_fp32_ms']:.2f} ms (float32); the "
-              "paper's whole planner on a GeForce 1080: 34 ms")
-        print(f"  training, batch {int(cfg.train.batch_size)}: "
-              f"{fig['train_stage_images_per_s']:.0f} images/s with the stage's settings, "
-              f"{fig['train_tf32_images_per_s']:.0f} with TF32 convolutions, "
-              f"{fig['train_autotuned_images_per_s']:.0f} with TF32 and autotuning (same run); "
-              f"peak GPU memory {fig['train_peak_gpu_mb']:.0f} MiB")
-        print(f"  one epoch of the paper experiment's {paper_train_images} training images: "
-              f"{fig['paper_epoch_min_stage']:.2f} min (stage settings, compute only)")
+        print(
+            f"  planning, one image through the network: {fig['planning_tf32_ms']:.2f} ms "
+            f"(TF32, PyTorch's default), {fig['planning_fp32_ms']:.2f} ms (float32); the "
+            "paper's whole planner on a GeForce 1080: 34 ms"
+        )
+        print(
+            f"  training, batch {int(cfg.train.batch_size)}: "
+            f"{fig['train_stage_images_per_s']:.0f} images/s with the stage's settings, "
+            f"{fig['train_tf32_images_per_s']:.0f} with TF32 convolutions, "
+            f"{fig['train_autotuned_images_per_s']:.0f} with TF32 and autotuning (same run); "
+            f"peak GPU memory {fig['train_peak_gpu_mb']:.0f} MiB"
+        )
+        print(
+            f"  one epoch of the paper experiment's {paper_train_images} training images: "
+            f"{fig['paper_epoch_min_stage']:.2f} min (stage settings, compute only)"
+        )
     for width in widths:
         agree = agreement(cfg, width, args.steps)
         results[f"width_{width}"]["agreement"] = agree
-        print(f"width {width}, one batch, relative error against float64 on the CPU "
-              "(loss / gradient):")
-        for key, name in (("cpu", "CPU float32"), ("cuda_stage", "CUDA, the stage's float32"),
-                          ("cuda_tf32", "CUDA, TF32 convolutions")):
-            print(f"  {name:30s} {agree[f'loss_rel_err_{key}']:.1e} / "
-                  f"{agree[f'grad_rel_err_{key}']:.1e}")
-        print(f"  two CUDA runs of {args.steps} steps, same seed, stage settings: "
-              f"{'bit-identical' if agree['cuda_runs_bit_identical'] else 'different'} weights "
-              f"(max |difference| {agree['cuda_runs_max_abs_weight_diff']:.2e})")
+        print(
+            f"width {width}, one batch, relative error against float64 on the CPU "
+            "(loss / gradient):"
+        )
+        for key, name in (
+            ("cpu", "CPU float32"),
+            ("cuda_stage", "CUDA, the stage's float32"),
+            ("cuda_tf32", "CUDA, TF32 convolutions"),
+        ):
+            print(
+                f"  {name:30s} {agree[f'loss_rel_err_{key}']:.1e} / "
+                f"{agree[f'grad_rel_err_{key}']:.1e}"
+            )
+        print(
+            f"  two CUDA runs of {args.steps} steps, same seed, stage settings: "
+            f"{'bit-identical' if agree['cuda_runs_bit_identical'] else 'different'} weights "
+            f"(max |difference| {agree['cuda_runs_max_abs_weight_diff']:.2e})"
+        )
     print(json.dumps(results, default=lambda v: round(v, 4) if isinstance(v, float) else v))
     return 0
 

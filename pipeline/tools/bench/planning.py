@@ -1,0 +1,222 @@
+"""Planning and closed-loop figures: the DCNN and Dex-Net-style planners per image, the servo
+loop."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from pipeline.tools.bench.common import BENCH_SEED, bench_scenes, intrinsics_of
+
+
+def planning_times(cfg, num_images: int = 8, repeats: int = 3) -> dict[str, float]:
+    """Median planning time per image (network + decoding + ranking with the closed loop's
+    second tier, CPU, 2 threads; the ``default`` network on 1 thread too). For the ``default``
+    network: the trained planner of ``models/train/latest`` when it exists (so the number of
+    ranked candidates is real), otherwise an untrained one of the same width.
+    For the ``paper`` network (width 1.0): network + decoding + ranking, untrained weights.
+    """
+    import torch
+
+    from pipeline.artifacts.fingerprint import REPO_ROOT
+    from pipeline.planner.network import GraspNet, network_config
+    from pipeline.planner.normalisation import Normalisation
+    from pipeline.planner.planner import Planner, fallback_threshold, ranking_config
+    from pipeline.runtime.cli import compose
+
+    torch.set_num_threads(2)
+    scenes = bench_scenes(cfg, num_images)
+    intr = intrinsics_of(cfg)
+    out: dict[str, float] = {}
+    trained = REPO_ROOT / "models" / "train" / "latest" / "model.pt"
+    for name in ("default", "paper"):
+        full = compose("train", [f"experiment={name}"])
+        if name == "default" and trained.is_file():
+            planner, label = Planner.load(trained.parent), "trained"
+        else:
+            net = GraspNet(network_config(full))
+            rk = ranking_config(full, min(full.train.threshold_grid))
+            planner = Planner(net, Normalisation(rk.d_ground, 0.1, 0.5), rk)
+            label = "untrained"
+        # the default network also on one thread: the paper's planning-time comparison point
+        floor = fallback_threshold(full, planner.ranking.threshold)
+        for threads in (2, 1) if name == "default" else (2,):
+            torch.set_num_threads(threads)
+            planner.plan(scenes[0].depth_m, intr, fallback_threshold=floor)  # warm-up
+            times, counts = [], []
+            for _ in range(1 if name == "paper" else repeats):
+                for sc in scenes[: 3 if name == "paper" else num_images]:
+                    t0 = time.perf_counter()
+                    counts.append(len(planner.plan(sc.depth_m, intr, fallback_threshold=floor)))
+                    times.append(time.perf_counter() - t0)
+            key = f"plan_{name}" + ("" if threads == 2 else f"_{threads}thread")
+            out[f"{key}_ms"] = 1000 * float(np.median(times))
+            out[f"{key}_candidates"] = float(np.mean(counts))
+            target = (
+                " (target <= 34 ms: the paper's, on a GTX 1080)"
+                if name == "default" and threads == 1
+                else ""
+            )
+            print(
+                f"planning, {name} network (width {full.model.width}, {label}), {threads} "
+                f"thread{'s' if threads > 1 else ''}: {out[f'{key}_ms']:.1f} ms/image, "
+                f"{np.mean(counts):.1f} candidates ranked{target}"
+            )
+        torch.set_num_threads(2)
+    return out
+
+
+def dexnet_figures(cfg, num_images: int = 6) -> dict[str, float]:
+    """Dex-Net-style planner: median planning time per image of each variant (the GQ-CNN of
+    ``data/baseline/latest`` when it exists, else untrained weights of the same size), and the
+    GQ-CNN's training throughput (crops/s, batch 64)."""
+    import torch
+
+    from pipeline.artifacts.fingerprint import REPO_ROOT
+    from pipeline.dexnet.gqcnn import GQCNN
+    from pipeline.dexnet.planner import (
+        DexNetPlanner,
+        cem_config,
+        crop_config,
+        gqcnn_config,
+        planarity_config,
+        sampler_config,
+        workspace,
+    )
+    from pipeline.runtime.cli import compose
+
+    torch.set_num_threads(2)
+    full = compose("baseline", ["experiment=default"])
+    scenes = bench_scenes(cfg, num_images)
+    intr = intrinsics_of(cfg)
+    out: dict[str, float] = {}
+    trained = REPO_ROOT / "data" / "baseline" / "latest" / "gqcnn.pt"
+    for variant in ("gqcnn", "planarity"):
+        if variant == "gqcnn" and trained.is_file():
+            planner, label = (
+                DexNetPlanner.from_config(full, "gqcnn", scenes[0].T_world_cam, trained.parent),
+                "trained",
+            )
+        else:
+            torch.manual_seed(0)
+            net = GQCNN(gqcnn_config(full)) if variant == "gqcnn" else None
+            planner = DexNetPlanner(
+                variant,
+                workspace(full, scenes[0].T_world_cam),
+                sampler_config(full),
+                cem_config(full),
+                planarity_config(full),
+                crop_config(full),
+                net,
+            )
+            label = "untrained" if variant == "gqcnn" else "analytic"
+        planner.plan(scenes[0].depth_m, intr)  # warm-up
+        times = []
+        for sc in scenes:
+            t0 = time.perf_counter()
+            planner.plan(sc.depth_m, intr)
+            times.append(time.perf_counter() - t0)
+        out[f"plan_dexnet_{variant}_ms"] = 1000 * float(np.median(times))
+        print(
+            f"planning, Dex-Net-style {variant} + CEM ({label}): "
+            f"{out[f'plan_dexnet_{variant}_ms']:.1f} ms/image"
+        )
+    net = GQCNN(gqcnn_config(full)).train()
+    opt = torch.optim.Adam(net.parameters(), lr=1e-3)
+    size = int(full.dexnet.crop.size)
+    x, pose = torch.randn(64, 1, size, size), torch.randn(64, 2)
+    y = (torch.rand(64) > 0.5).float()
+    times = []
+    for _ in range(6):
+        t0 = time.perf_counter()
+        opt.zero_grad()
+        torch.nn.functional.binary_cross_entropy_with_logits(net(x, pose), y).backward()
+        opt.step()
+        times.append(time.perf_counter() - t0)
+    out["gqcnn_train_crops_per_s"] = 64 / float(np.median(times[1:]))
+    print(f"GQ-CNN training, batch 64: {out['gqcnn_train_crops_per_s']:.0f} crops/s")
+    return out
+
+
+def closed_loop_figures(
+    cfg_name: str = "evaluate", renderer: str | None = None, descriptor: bool = True, boxes: int = 3
+) -> dict[str, float]:
+    """Closed loop: the descriptor's time per 416 x 416 frame, and one trial of ``boxes`` driven by
+    the training-free Dex-Net-style planarity planner (no artifact needed): control-loop rate
+    (wall), simulated seconds per wall second, wall time of the trial, and where a control step's
+    wall time goes (median ms per call of each part). ``renderer``: ``camera.renderer`` (None:
+    the configured one); keys carry its name when given."""
+    import torch
+
+    from pipeline.controller.planning import DexNetStylePlanner
+    from pipeline.runtime.cli import compose
+    from pipeline.servo.descriptor import describe_surface
+    from pipeline.world.trial import make_runner
+
+    torch.set_num_threads(1)
+    extra = [f"camera.renderer={renderer}"] if renderer else []
+    cfg = compose(
+        cfg_name,
+        [
+            "experiment=default",
+            f"evaluate.boxes_per_trial={boxes}",
+            "evaluate.dexnet_variant=planarity",
+            *extra,
+        ],
+    )
+    runner = make_runner(
+        cfg,
+        "dexnet",
+        lambda cell: DexNetStylePlanner(cfg, "planarity", cell.robot.home_camera_pose(), None),
+    )
+    cell = runner.cell
+    out: dict[str, float] = {}
+    if descriptor:
+        cell.reset(np.random.default_rng([BENCH_SEED, 31, 0]), boxes)
+        frame = cell.render()
+        ys, xs = np.nonzero(np.isin(frame.body_ids, list(cell.boxes)))
+        seed = np.array([xs[len(xs) // 2], ys[len(ys) // 2]], np.float64)
+        dcfg = runner.robot_side.descriptor_cfg  # conf/servo/, as the closed loop uses it
+        times = []
+        for _ in range(20):
+            t0 = time.perf_counter()
+            describe_surface(frame.depth_m, cell.intrinsics, seed, dcfg)
+            times.append(time.perf_counter() - t0)
+        out["descriptor_ms_per_frame"] = 1000 * float(np.median(times))
+        print(f"surface descriptor, 416x416 frame: {out['descriptor_ms_per_frame']:.1f} ms")
+    t0 = time.perf_counter()
+    result = runner.run_trial(
+        0, np.random.default_rng([BENCH_SEED, 31, 0]), np.random.default_rng([BENCH_SEED, 37, 0])
+    )
+    wall = time.perf_counter() - t0
+    cell.close()
+    runner.robot_side.close()
+    tm = {**runner.timings, **runner.robot_side.timings}
+    sfx = f"_{renderer}" if renderer else ""
+    steps = tm["control_step_s"]
+    out[f"control_loop_hz{sfx}"] = 1.0 / float(np.median(steps)) if steps else float("nan")
+    out[f"sim_s_per_wall_s{sfx}"] = result.sim_s / wall
+    out[f"trial_{boxes}_boxes_wall_s{sfx}"] = wall
+    parts = {
+        "render": "render_s",
+        "descriptor": "descriptor_s",
+        "control law + Jacobian + joint update": "control_law_s",
+        "physics": "physics_s",
+        "collision check": "collision_s",
+    }
+    ms = {k: 1000 * float(np.median(tm[v])) if tm[v] else 0.0 for k, v in parts.items()}
+    for k, v in parts.items():
+        out[f"step_{v[:-2]}_ms{sfx}"] = ms[k]
+    name = renderer or str(cfg.camera.renderer)
+    print(
+        f"closed loop ({name}): control loop {out[f'control_loop_hz{sfx}']:.1f} Hz (wall), "
+        f"{out[f'sim_s_per_wall_s{sfx}']:.2f} simulated s per wall s; one {boxes}-box trial "
+        f"{wall:.1f} s wall ({result.picked}/{result.boxes} picked in {len(result.attempts)} "
+        f"attempts, {result.sim_s:.1f} s simulated)"
+    )
+    print(
+        f"  control step {1000 * float(np.median(steps)) if steps else float('nan'):.1f} ms "
+        "(median): " + ", ".join(f"{k} {v:.1f} ms" for k, v in ms.items())
+    )
+    return out
