@@ -11,11 +11,11 @@ RUN := $(PY) -m
 # NPROC > 1: data-parallel training, one process per CPU share or GPU (torchrun + DDP).
 TRAIN := $(if $(filter-out 1,$(NPROC)),.venv/bin/torchrun --standalone --nproc_per_node=$(NPROC) -m,$(RUN)) pipeline.stages.train
 
-.PHONY: help setup lint test test-slow reproduce generate label train baseline evaluate unseen ablation robustness report verify view bench repro-check lock clean
+.PHONY: help setup lint test test-slow reproduce generate label train baseline evaluate unseen ablation robustness report verify view profile bench repro-check lock clean
 
 help: ## List the targets
 	@grep -hE '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  make %-12s %s\n", $$1, $$2}'
-	@echo "  Variables: EXPERIMENT=smoke|default|paper (default: default), ARGS='hydra overrides', STAGE=<stage> (view), NPROC=<n> (train)"
+	@echo "  Variables: EXPERIMENT=smoke|default|paper (default: default), ARGS='hydra overrides', STAGE=<stage> (view, profile), NPROC=<n> (train)"
 
 setup: ## Create .venv with the pinned packages and check system libraries (quick if done)
 	@bash scripts/setup.sh
@@ -74,6 +74,9 @@ verify: setup ## Re-hash every artifact against its manifest
 
 view: setup ## Open the latest log of STAGE (default: generate) in the Rerun viewer
 	@$(RUN) pipeline.tools.view $(STAGE) $(ARGS)
+
+profile: setup ## Where STAGE's time goes: run it under py-spy, print each part's share (ARGS: its overrides)
+	$(RUN) pipeline.tools.profile $(STAGE) $(ARGS)
 
 bench: setup ## Print measured throughput figures (generation scenes/s, render time)
 	$(RUN) pipeline.tools.bench $(ARGS)
