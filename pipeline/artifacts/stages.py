@@ -1,10 +1,10 @@
 """The artifacts a study stage (robustness, unseen) compares: the trained network and its baseline.
 
 A study stage reads the trained network and the baseline artifact that compared it
-(``compared_pair``: ``latest`` by default, as ``make reproduce`` leaves them) and runs the
-other stages it needs with the command's own overrides plus its own; each run is reused when
-its version already exists (``run_stage``), so a study after ``make reproduce`` recomputes only
-what differs, and a study rerun after a code change does not retrain the network.
+(``compared_pair``: ``latest`` by default, as ``make reproduce`` leaves them), then runs the
+other stages it needs by name (``pipeline.runtime.cli.run_named_stage``) with the command's own
+overrides plus its own; each run is reused when its version already exists (``run_stage``), so
+a study after ``make reproduce`` recomputes only what differs.
 """
 
 from __future__ import annotations

@@ -111,8 +111,9 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if not args.stage:
         parser.error("name a stage (e.g. label) or give --summarise FILE")
-    spy = shutil.which("py-spy") or str(Path(sys.executable).with_name("py-spy"))
-    if not Path(spy).exists() and shutil.which("py-spy") is None:
+    beside = Path(sys.executable).with_name("py-spy")  # the project's environment first
+    spy = str(beside) if beside.exists() else shutil.which("py-spy")
+    if spy is None:
         print(
             "error: py-spy is not installed: run `make setup` (it is in requirements.lock)",
             file=sys.stderr,
