@@ -1,9 +1,14 @@
 """Bin-picking grasp-planning pipeline (reproduction of Jiang et al., Sensors 2020, 20(3), 706).
 
-Folders follow the method: ``simulation/`` builds box heaps in pybullet, ``camera/`` holds
-intrinsics, rendering and back-projection, ``artifacts/`` versions and verifies stage outputs,
-``tracking/`` writes the Rerun and MCAP logs, and each stage (``generate``, ``report``, ...)
-is one module with a pure function and a thin Hydra command line.
+Folders follow the method and its layers (docs/architecture.md): ``stages/`` holds the
+pipeline's stages (generate, label, train, baseline, evaluate, unseen, ablation, robustness),
+each a pure function of its config and inputs with a thin Hydra command line; ``report/`` is the
+report stage and ``tools/`` the tools (bench, view, verify, repro-check, profile). The libraries
+beneath them: ``world/`` (the simulated cell of the closed loop) and ``controller/``,
+``servo/``, ``planner/``, ``dexnet/`` (the robot side), ``labelling/``, ``grasping/``,
+``simulation/``, ``robot/``, ``dataset/``, ``camera/`` and ``cell/``; ``runtime/``,
+``artifacts/``, ``tracking/`` and ``config/`` run stages, version their outputs, write the
+Rerun and MCAP logs and hold the configuration schema.
 """
 
 __all__ = ["__version__"]

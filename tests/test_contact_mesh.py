@@ -23,9 +23,10 @@ from conftest import default_config
 
 from pipeline.camera.geometry import Intrinsics, backproject, camera_pose_above_bin, pose_matrix
 from pipeline.camera.render import render_depth
-from pipeline.dexnet.contact import REASONS, evaluate_contacts, robust_quality
+from pipeline.dexnet.contact import REASONS, BoxScene, evaluate_contacts, robust_quality
 from pipeline.dexnet.contact_mesh import (
     MAX_NORMAL_ANGLE_DEG,
+    BodyScene,
     RayScene,
     evaluate_contacts_mesh,
     robust_quality_mesh,
@@ -124,22 +125,10 @@ def _cam_dir(dirs_world) -> np.ndarray:
 
 
 def _both(scene, points_cam, axes_cam, **kw):
-    analytic = evaluate_contacts(
-        points_cam, axes_cam, scene.depth, scene.mask, INTR_BOX, scene.boxes, DOWN, CFG
-    )
-    mesh = evaluate_contacts_mesh(
-        points_cam,
-        axes_cam,
-        scene.depth,
-        scene.mask,
-        INTR_BOX,
-        T_DOWN,
-        scene.client,
-        scene.bodies,
-        DOWN,
-        CFG,
-        **kw,
-    )
+    boxes = BoxScene(scene.depth, scene.mask, INTR_BOX, DOWN, scene.boxes)
+    analytic = evaluate_contacts(points_cam, axes_cam, boxes, CFG)
+    bodies = BodyScene(scene.depth, scene.mask, INTR_BOX, DOWN, T_DOWN, scene.client, scene.bodies)
+    mesh = evaluate_contacts_mesh(points_cam, axes_cam, bodies, CFG, **kw)
     return analytic, mesh
 
 
@@ -276,38 +265,12 @@ def test_robust_quality_matches_the_analytic_model(box_scene):
     points = _cam([c[0] for c in NAMED])
     axes = _cam_dir([c[1] for c in NAMED])
     s = box_scene
-    q = robust_quality(
-        points, axes, s.depth, s.mask, INTR_BOX, s.boxes, DOWN, CFG, np.random.default_rng(5)
-    )
+    boxes = BoxScene(s.depth, s.mask, INTR_BOX, DOWN, s.boxes)
+    q = robust_quality(points, axes, boxes, CFG, np.random.default_rng(5))
+    bodies = BodyScene(s.depth, s.mask, INTR_BOX, DOWN, T_DOWN, s.client, s.bodies)
     with RayScene(s.client) as rays:
-        qm = robust_quality_mesh(
-            points,
-            axes,
-            s.depth,
-            s.mask,
-            INTR_BOX,
-            T_DOWN,
-            s.client,
-            s.bodies,
-            DOWN,
-            CFG,
-            np.random.default_rng(5),
-            rays=rays,
-        )
-        again = robust_quality_mesh(
-            points,
-            axes,
-            s.depth,
-            s.mask,
-            INTR_BOX,
-            T_DOWN,
-            s.client,
-            s.bodies,
-            DOWN,
-            CFG,
-            np.random.default_rng(5),
-            rays=rays,
-        )
+        qm = robust_quality_mesh(points, axes, bodies, CFG, np.random.default_rng(5), rays=rays)
+        again = robust_quality_mesh(points, axes, bodies, CFG, np.random.default_rng(5), rays=rays)
     np.testing.assert_array_equal(qm, q)  # the same perturbations, labelled alike
     np.testing.assert_array_equal(qm, again)
     assert qm[0] >= 0.8 and qm[1] <= 0.1 and qm[4] == 0.0  # centre, edge, floor
@@ -317,7 +280,7 @@ def test_targets_and_a_reused_ray_scene(box_scene):
     s = box_scene
     points = _cam([(0.0, 0.0, 0.05), (-0.04, 0.02, 0.054)])
     axes = _cam_dir([(0, 0, -1), (0, 0, -1)])
-    args = (s.depth, s.mask, INTR_BOX, T_DOWN, s.client, s.bodies, DOWN, CFG)
+    args = (BodyScene(s.depth, s.mask, INTR_BOX, DOWN, T_DOWN, s.client, s.bodies), CFG)
     free = evaluate_contacts_mesh(points, axes, *args)
     with RayScene(s.client) as rays:
         reused = evaluate_contacts_mesh(points, axes, *args, rays=rays)
@@ -410,13 +373,7 @@ def test_centre_of_mass_is_the_inertial_frame(client):
     res = evaluate_contacts_mesh(
         _cam([(0.0, 0.0, 0.05)]),
         _cam_dir([(0, 0, -1)]),
-        depth,
-        mask,
-        INTR_BOX,
-        T_DOWN,
-        client,
-        [big],
-        DOWN,
+        BodyScene(depth, mask, INTR_BOX, DOWN, T_DOWN, client, [big]),
         CFG,
     )
     assert _reasons(res) == ["bending"] and res.seal.tolist() == [True]
@@ -465,7 +422,10 @@ def test_cup_on_the_top_line_of_a_lying_cylinder(client, radius, expected):
     # differs from the circle's by under 0.02 mm.
     point = _cam([(0.0, 0.0, 2 * apothem)])
     res = evaluate_contacts_mesh(
-        point, _cam_dir([(0, 0, -1)]), depth, mask, INTR_CYL, T_DOWN, client, [body], DOWN, CFG
+        point,
+        _cam_dir([(0, 0, -1)]),
+        BodyScene(depth, mask, INTR_CYL, DOWN, T_DOWN, client, [body]),
+        CFG,
     )
     assert _reasons(res) == [expected] and res.instance.tolist() == [1]
     assert res.seal.tolist() == [expected == "ok"]
@@ -482,7 +442,10 @@ def test_heavy_cylinder_held_far_from_its_com_bends(client):
     depth, mask = _images(client, INTR_CYL, T_DOWN, floor, [body], "tinyrenderer")
     points = _cam([(0.0, d, 2 * apothem) for d in (0.05, 0.02, 0.0)])
     res = evaluate_contacts_mesh(
-        points, _cam_dir([(0, 0, -1)] * 3), depth, mask, INTR_CYL, T_DOWN, client, [body], DOWN, CFG
+        points,
+        _cam_dir([(0, 0, -1)] * 3),
+        BodyScene(depth, mask, INTR_CYL, DOWN, T_DOWN, client, [body]),
+        CFG,
     )
     assert _reasons(res) == ["bending", "ok", "ok"]
     assert res.seal.tolist() == [True, True, True]
@@ -510,13 +473,7 @@ def test_end_face_held_off_the_axis_twists(client):
     res = evaluate_contacts_mesh(
         points,
         np.tile([0.0, 0.0, 1.0], (2, 1)),
-        depth,
-        mask,
-        INTR_CYL,
-        T,
-        client,
-        [body],
-        gravity,
+        BodyScene(depth, mask, INTR_CYL, gravity, T, client, [body]),
         CFG,
     )
     assert _reasons(res) == ["torsion", "bending"]

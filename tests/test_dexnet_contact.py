@@ -21,7 +21,7 @@ import pytest
 from conftest import default_config
 
 from pipeline.camera.geometry import Intrinsics
-from pipeline.dexnet.contact import REASONS, evaluate_contacts, robust_quality
+from pipeline.dexnet.contact import REASONS, BoxScene, evaluate_contacts, robust_quality
 from pipeline.grasping.suction import SuctionModelConfig
 
 INTR = Intrinsics(120, 120, 150.0, 150.0, 59.5, 59.5)
@@ -71,7 +71,7 @@ def _evaluate(boxes, points, axes=None, gravity=DOWN, background_z=FLOOR, cfg=CF
     depth, mask = _render(boxes, background_z)
     points = np.atleast_2d(np.asarray(points, dtype=float))
     axes = np.tile(Z_AXIS, (len(points), 1)) if axes is None else np.atleast_2d(axes)
-    return evaluate_contacts(points, axes, depth, mask, INTR, boxes, gravity, cfg)
+    return evaluate_contacts(points, axes, BoxScene(depth, mask, INTR, gravity, boxes), cfg)
 
 
 def _reasons(result) -> list[str]:
@@ -231,16 +231,13 @@ def test_robust_quality():
     # 1 mm inside the edge the rim overhangs by 8 mm = 4 sigma of the shift: q ~ 0.
     points = np.array([[0.0, 0.0, TOP], [0.0715, 0.0, TOP], [0.12, 0.0, FLOOR]])
     axes = np.tile(Z_AXIS, (3, 1))
+    scene = BoxScene(depth, mask, INTR, DOWN, boxes)
 
     def quality(seed: int) -> np.ndarray:
-        return robust_quality(
-            points, axes, depth, mask, INTR, boxes, DOWN, CFG, np.random.default_rng(seed)
-        )
+        return robust_quality(points, axes, scene, CFG, np.random.default_rng(seed))
 
     q = quality(0)
     assert q.shape == (3,) and np.all((q >= 0.0) & (q <= 1.0))
     assert q[0] >= 0.8 and q[1] <= 0.1 and q[2] == 0.0
     np.testing.assert_array_equal(q, quality(0))
-    assert robust_quality(
-        points[:0], axes[:0], depth, mask, INTR, boxes, DOWN, CFG, np.random.default_rng(0)
-    ).shape == (0,)
+    assert robust_quality(points[:0], axes[:0], scene, CFG, np.random.default_rng(0)).shape == (0,)

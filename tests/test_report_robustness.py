@@ -14,6 +14,7 @@ from pipeline.artifacts import ArtifactError, run_stage
 from pipeline.report.robustness import (
     ROBUSTNESS_NOT_RUN,
     ROBUSTNESS_SECTION,
+    RobustnessSection,
     render_robustness,
     resolve_robustness,
     robustness_closed_loop_table,
@@ -470,7 +471,7 @@ def _tables(info) -> dict:
 def test_section_text(info) -> None:
     tables = _tables(info)
     text = "\n".join(render_robustness(info, tables, None, "No depth figure: missing."))
-    assert text.startswith(f"## {ROBUSTNESS_SECTION}")
+    assert RobustnessSection().markdown(info, tables, {})[0] == f"## {ROBUSTNESS_SECTION}"
     for heading in (
         "### Sensor model",
         "### Sensor noise: Table 1",
@@ -497,7 +498,7 @@ def test_section_text(info) -> None:
 
 def test_absent_study_says_how_to_run_it(tmp_path: Path) -> None:
     assert resolve_robustness(tmp_path / "data", "latest") is None
-    text = "\n".join(render_robustness(None, {}, None))
+    text = "\n".join(RobustnessSection().markdown(None, {}, {}))
     assert ROBUSTNESS_NOT_RUN in text and "make robustness" in text
     assert "report.robustness_version" in NOT_AFFECTING_RESULT
     assert compose("report", ["experiment=smoke"]).report.robustness_version == "latest"

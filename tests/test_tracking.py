@@ -61,8 +61,13 @@ def write_log(folder: Path, bump: float = 0.0) -> None:
     T[:3, :3] = np.diag([1.0, -1.0, -1.0])  # looking straight down
     T[:3, 3] = [0.0, 0.0, 1.2]
     with StageLog(folder, "test_tracking", "rec-0001", blueprint=default_blueprint(CAM)) as log:
-        log.log_static_boxes(
-            BIN, [[0.0, 0.0, 0.05]], [[0.6, 0.4, 0.1]], [[0, 0, 0, 1.0]], labels=["bin"]
+        log.log_boxes(
+            BIN,
+            [[0.0, 0.0, 0.05]],
+            [[0.6, 0.4, 0.1]],
+            [[0, 0, 0, 1.0]],
+            labels=["bin"],
+            static=True,
         )
         for i in range(N_SCENES):
             log.set_time(

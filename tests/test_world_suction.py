@@ -24,7 +24,7 @@ import pytest
 from conftest import default_config
 
 from pipeline.camera.geometry import Intrinsics
-from pipeline.dexnet.contact import REASONS, evaluate_contacts
+from pipeline.dexnet.contact import REASONS, BoxScene, evaluate_contacts
 from pipeline.grasping.suction import SuctionModelConfig, hold_test
 from pipeline.robot.model import Robot, RobotConfig
 from pipeline.robot.urdf_builder import CUP_OFFSET
@@ -352,7 +352,10 @@ def test_one_cup_reproduces_the_dexnet_contact_rule(density, gravity_dir, expect
     T[:3, 3] = centre
     boxes = [type("B", (), {"size": size, "T_cam_box": T})()]
     ref = evaluate_contacts(
-        pts, np.tile(axis, (len(pts), 1)), depth, mask, intr, boxes, np.array(gravity_dir), cfg
+        pts,
+        np.tile(axis, (len(pts), 1)),
+        BoxScene(depth, mask, intr, np.array(gravity_dir), boxes),
+        cfg,
     )
     assert ref.seal.all()
     g = cfg.gravity * np.asarray(gravity_dir) / np.linalg.norm(gravity_dir)

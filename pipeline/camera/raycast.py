@@ -47,6 +47,14 @@ class UnsupportedGeometry(ValueError):
     """A visible shape that is not a box: the ray-cast renderer cannot draw it."""
 
 
+def all_bodies(client: int) -> list[int]:
+    """The unique ids of every body in the pybullet client, in the client's order."""
+    return [
+        p.getBodyUniqueId(i, physicsClientId=client)
+        for i in range(p.getNumBodies(physicsClientId=client))
+    ]
+
+
 def boxes_from_pybullet(client: int, body_ids=None) -> list[BoxShape]:
     """The visible box shapes of ``body_ids`` (all bodies of the client when None), posed now.
 
@@ -58,10 +66,7 @@ def boxes_from_pybullet(client: int, body_ids=None) -> list[BoxShape]:
         UnsupportedGeometry: a listed body has a visible shape that is not a box, or links.
     """
     if body_ids is None:
-        body_ids = [
-            p.getBodyUniqueId(i, physicsClientId=client)
-            for i in range(p.getNumBodies(physicsClientId=client))
-        ]
+        body_ids = all_bodies(client)
     out = []
     for body in body_ids:
         shapes = p.getVisualShapeData(body, physicsClientId=client)

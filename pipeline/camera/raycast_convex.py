@@ -31,7 +31,7 @@ import pybullet as p
 from scipy.spatial import ConvexHull
 
 from pipeline.camera.geometry import Intrinsics, pose_matrix
-from pipeline.camera.raycast import UnsupportedGeometry, ray_grid
+from pipeline.camera.raycast import UnsupportedGeometry, all_bodies, ray_grid
 
 
 @dataclass(frozen=True)
@@ -90,10 +90,7 @@ def convex_from_pybullet(client: int, body_ids=None) -> list[ConvexShape]:
         UnsupportedGeometry: a listed body has links or another kind of collision shape.
     """
     if body_ids is None:
-        body_ids = [
-            p.getBodyUniqueId(i, physicsClientId=client)
-            for i in range(p.getNumBodies(physicsClientId=client))
-        ]
+        body_ids = all_bodies(client)
     out = []
     for body in body_ids:
         visual = p.getVisualShapeData(body, physicsClientId=client)
@@ -128,16 +125,9 @@ def convex_from_pybullet(client: int, body_ids=None) -> list[ConvexShape]:
 def raycast_convex(
     shapes: list[ConvexShape], intr: Intrinsics, T_world_cam: np.ndarray, near: float, far: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Z-depth and body ids of the nearest convex surface through every pixel centre.
-
-    Args:
-        shapes: the solids to draw (``convex_from_pybullet``).
-        intr: camera intrinsics; T_world_cam: (4, 4) camera pose, OpenCV axes.
-        near, far: the visible depth range, metres.
-
-    Returns:
-        depth: (H, W) float32 z-depth in metres, ``far`` where nothing is seen.
-        body_ids: (H, W) int32 body id of the seen solid, -1 where none.
+    """Z-depth and body ids of the nearest convex surface through every pixel centre: as
+    ``raycast.raycast_boxes`` (the same arguments, frames, units and returns) for the solids of
+    ``convex_from_pybullet``, −1 where no solid is seen.
 
     The arithmetic per pixel and plane is in float64 (a solid has tens of planes, not three,
     and a thin sliver between two nearly parallel planes must not open up by rounding).

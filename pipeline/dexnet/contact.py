@@ -115,6 +115,41 @@ class ContactResult:
     instance: np.ndarray
 
 
+@dataclass(frozen=True, eq=False)
+class ContactScene:
+    """What suction grasps are labelled against, camera frame (OpenCV axes), metres: the image
+    that rule 3 checks the contacts against and gravity's direction for rule 4. ``BoxScene``
+    adds the boxes (``evaluate_contacts``), ``contact_mesh.BodyScene`` the pybullet bodies
+    (``contact_mesh.evaluate_contacts_mesh``).
+
+    Attributes:
+        depth_m: (H, W) z-depth in metres, 0 = no data (noise-free depth for exact labels).
+        mask: (H, W) instance mask: 0 = nothing graspable, k = the k-th object of the scene
+            (``BoxScene.boxes[k-1]``, ``BodyScene.graspable[k-1]``).
+        intrinsics: the camera's intrinsics; the image size must match depth and mask.
+        gravity_cam: (3,) direction of gravity in the camera frame; normalised where used.
+    """
+
+    depth_m: np.ndarray
+    mask: np.ndarray
+    intrinsics: Intrinsics
+    gravity_cam: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class BoxScene(ContactScene):
+    """A ``ContactScene`` of boxes, for ``evaluate_contacts``: the mask value of ``boxes[k-1]``
+    is k.
+
+    Attributes:
+        boxes: sequence of objects with ``size`` (3,) edge lengths in metres, optionally
+            ``mass`` (kg; None or absent: ``cfg.density`` x volume), and ``T_cam_box``
+            (4, 4) box-centre pose in the camera frame (e.g. ``pipeline.dataset.scenes.Box``).
+    """
+
+    boxes: Sequence
+
+
 def _slab(origins: np.ndarray, dirs: np.ndarray, half: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Lines ``origins + s dirs`` (s >= 0) against boxes centred at the origin, in the box frame.
 
@@ -165,13 +200,7 @@ def unit_rows(x: np.ndarray, name: str) -> np.ndarray:
 
 
 def checked_inputs(
-    points_cam,
-    axes_cam,
-    depth_m: np.ndarray,
-    mask: np.ndarray,
-    intrinsics: Intrinsics,
-    gravity_cam,
-    cfg: SuctionModelConfig,
+    points_cam, axes_cam, scene: ContactScene, cfg: SuctionModelConfig
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The contact models' inputs checked: (points (N, 3), unit axes (N, 3), unit gravity (3,)),
     camera frame. Raises ``ValueError`` for unequal point and axis counts, a depth image or mask
@@ -180,7 +209,8 @@ def checked_inputs(
     a = unit_rows(np.asarray(axes_cam, dtype=np.float64).reshape(-1, 3), "axes_cam")
     if len(a) != len(p):
         raise ValueError(f"{len(p)} points but {len(a)} axes")
-    shape = (intrinsics.height, intrinsics.width)
+    depth_m, mask = scene.depth_m, scene.mask
+    shape = (scene.intrinsics.height, scene.intrinsics.width)
     if depth_m.shape != shape or mask.shape != shape:
         raise ValueError(
             f"depth {depth_m.shape} and mask {mask.shape} must both be (H, W) = "
@@ -188,7 +218,7 @@ def checked_inputs(
         )
     if cfg.ring_points < 3:
         raise ValueError(f"ring_points must be >= 3, not {cfg.ring_points}")
-    g_dir = unit_rows(np.asarray(gravity_cam, dtype=np.float64).reshape(3), "gravity_cam")
+    g_dir = unit_rows(np.asarray(scene.gravity_cam, dtype=np.float64).reshape(3), "gravity_cam")
     return p, a, g_dir
 
 
@@ -215,17 +245,13 @@ def rim_ring(axes: np.ndarray, cfg: SuctionModelConfig) -> np.ndarray:
 
 
 def occluded_contacts(
-    points: np.ndarray,
-    instance: np.ndarray,
-    depth_m: np.ndarray,
-    mask: np.ndarray,
-    intrinsics: Intrinsics,
-    cfg: SuctionModelConfig,
+    points: np.ndarray, instance: np.ndarray, scene: ContactScene, cfg: SuctionModelConfig
 ) -> np.ndarray:
     """Rule 3: (M,) whether any of each candidate's contact points (M, P, 3) (rim hits and the
-    centre's, camera frame) is not what the camera sees there: outside the image or behind it,
-    another instance in ``mask`` than ``instance`` (M,), or a depth more than
+    centre's, camera frame) is not what the camera of ``scene`` sees there: outside the image or
+    behind it, another instance in its mask than ``instance`` (M,), or a depth more than
     ``visibility_tolerance`` away."""
+    depth_m, mask, intrinsics = scene.depth_m, scene.mask, scene.intrinsics
     z = points[..., 2]
     in_front = z > 1e-9
     z_safe = np.where(in_front, z, 1.0)
@@ -287,14 +313,7 @@ def record_rules(
 
 
 def evaluate_contacts(
-    points_cam: np.ndarray,
-    axes_cam: np.ndarray,
-    depth_m: np.ndarray,
-    mask: np.ndarray,
-    intrinsics: Intrinsics,
-    boxes: Sequence,
-    gravity_cam: np.ndarray,
-    cfg: SuctionModelConfig,
+    points_cam: np.ndarray, axes_cam: np.ndarray, scene: BoxScene, cfg: SuctionModelConfig
 ) -> ContactResult:
     """Seal and wrench resistance of N suction grasps, by the rules of the module docstring.
 
@@ -302,19 +321,15 @@ def evaluate_contacts(
         points_cam: (N, 3) contact points in the camera frame, metres.
         axes_cam: (N, 3) approach axes in the camera frame, pointing into the object (away from
             the camera); normalised here.
-        depth_m: (H, W) z-depth in metres, 0 = no data (noise-free depth for exact labels).
-        mask: (H, W) instance mask: 0 = not a box, k = ``boxes[k-1]``.
-        intrinsics: the camera's intrinsics; the image size must match depth and mask.
-        boxes: sequence of objects with ``size`` (3,) edge lengths in metres, optionally
-            ``mass`` (kg; None or absent: ``cfg.density`` x volume), and ``T_cam_box``
-            (4, 4) box-centre pose in the camera frame (e.g. ``pipeline.dataset.scenes.Box``).
-        gravity_cam: (3,) direction of gravity in the camera frame; normalised here.
+        scene: the image (depth, instance mask, intrinsics), the true boxes and gravity's
+            direction, camera frame.
         cfg: model settings.
 
     Returns:
         A ContactResult of (N,) arrays.
     """
-    p, a, g_dir = checked_inputs(points_cam, axes_cam, depth_m, mask, intrinsics, gravity_cam, cfg)
+    p, a, g_dir = checked_inputs(points_cam, axes_cam, scene, cfg)
+    boxes = scene.boxes
     n = len(p)
     out = empty_result(n)
     if n == 0 or len(boxes) == 0:
@@ -354,7 +369,7 @@ def evaluate_contacts(
     pts = np.concatenate(
         [rim_start + s_rim[..., None] * a_on[:, None, :], hit0[:, None, :]], axis=1
     )  # (M, K + 1, 3)
-    occluded = occluded_contacts(pts, b + 1, depth_m, mask, intrinsics, cfg)
+    occluded = occluded_contacts(pts, b + 1, scene, cfg)
 
     # Rule 4: the box's weight against the soft contact's wrench limits.
     mass = np.array([box_mass(x, cfg.density) for x in boxes])[b]  # (M,)
@@ -365,11 +380,7 @@ def evaluate_contacts(
 def robust_quality(
     points_cam: np.ndarray,
     axes_cam: np.ndarray,
-    depth_m: np.ndarray,
-    mask: np.ndarray,
-    intrinsics: Intrinsics,
-    boxes: Sequence,
-    gravity_cam: np.ndarray,
+    scene: BoxScene,
     cfg: SuctionModelConfig,
     rng: np.random.Generator,
 ) -> np.ndarray:
@@ -382,8 +393,7 @@ def robust_quality(
     ``evaluate_contacts`` (one vectorised call over candidates x perturbations).
 
     Args:
-        points_cam, axes_cam, depth_m, mask, intrinsics, boxes, gravity_cam, cfg: as for
-            ``evaluate_contacts``.
+        points_cam, axes_cam, scene, cfg: as for ``evaluate_contacts``.
         rng: source of the perturbations; the same generator state gives the same result.
 
     Returns:
@@ -393,16 +403,7 @@ def robust_quality(
     points, axes = perturbed_grasps(points_cam, axes_cam, cfg, rng)
     if len(points) == 0:
         return np.zeros(0)
-    result = evaluate_contacts(
-        points.reshape(-1, 3),
-        axes.reshape(-1, 3),
-        depth_m,
-        mask,
-        intrinsics,
-        boxes,
-        gravity_cam,
-        cfg,
-    )
+    result = evaluate_contacts(points.reshape(-1, 3), axes.reshape(-1, 3), scene, cfg)
     return result.wrench_ok.reshape(points.shape[:2]).mean(axis=1)
 
 

@@ -67,16 +67,18 @@ draws from ``rng`` in the same order) and labels them with ``evaluate_contacts_m
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 import pybullet as p
 import trimesh
 
-from pipeline.camera.geometry import Intrinsics, pose_matrix
+from pipeline.camera.geometry import pose_matrix
 from pipeline.dexnet.contact import (  # noqa: F401  (REASONS etc. re-exported for callers)
     REASONS,
     START_OFFSET,
     ContactResult,
+    ContactScene,
     checked_inputs,
     empty_result,
     occluded_contacts,
@@ -96,6 +98,22 @@ LINE_LENGTH = 10.0
 _ANY, _PICKED = 1, 2
 # Rays per p.rayTestBatch call (pybullet's limit is 16384).
 RAY_BATCH = 8192
+
+
+@dataclass(frozen=True, eq=False)
+class BodyScene(ContactScene):
+    """A ``ContactScene`` of pybullet bodies, for ``evaluate_contacts_mesh``: the mask value of
+    ``graspable[k-1]`` is k.
+
+    Attributes:
+        T_world_cam: (4, 4) camera pose (OpenCV axes) in the world frame of ``client``.
+        client: the pybullet client holding the bodies, posed as in the image.
+        graspable: body ids of the graspable objects, in mask order.
+    """
+
+    T_world_cam: np.ndarray
+    client: int
+    graspable: Sequence[int]
 
 
 class RayScene:
@@ -287,13 +305,7 @@ class RayScene:
 def evaluate_contacts_mesh(
     points_cam: np.ndarray,
     axes_cam: np.ndarray,
-    depth_m: np.ndarray,
-    mask: np.ndarray,
-    intrinsics: Intrinsics,
-    T_world_cam: np.ndarray,
-    client: int,
-    graspable: Sequence[int],
-    gravity_cam: np.ndarray,
+    scene: BodyScene,
     cfg: SuctionModelConfig,
     *,
     targets: np.ndarray | None = None,
@@ -307,27 +319,21 @@ def evaluate_contacts_mesh(
         points_cam: (N, 3) contact points in the camera frame, m.
         axes_cam: (N, 3) approach axes in the camera frame, pointing into the object; normalised
             here.
-        depth_m: (H, W) z-depth in metres, 0 = no data (noise-free depth for exact labels).
-        mask: (H, W) instance mask: 0 = not graspable, k = ``graspable[k-1]``.
-        intrinsics: the camera's intrinsics; the image size must match depth and mask.
-        T_world_cam: (4, 4) camera pose (OpenCV axes) in the world frame of ``client``.
-        client: the pybullet client holding the bodies, posed as in the image.
-        graspable: body ids of the graspable objects, in mask order.
-        gravity_cam: (3,) direction of gravity in the camera frame; normalised here.
+        scene: the image (depth, instance mask, intrinsics), the camera's pose in the world of
+            the pybullet client, the graspable bodies and gravity's direction.
         cfg: model settings (``density`` is not used: each body has its own mass).
-        targets: optional (N,) body id each candidate is meant for (each one of ``graspable``);
-            None: the first body the centre line hits is the target when it is graspable.
-        rays: a ``RayScene`` of ``client`` to reuse (it must hold every body a line may meet);
-            None: one of all the client's bodies is made and closed here.
+        targets: optional (N,) body id each candidate is meant for (each one of
+            ``scene.graspable``); None: the first body the centre line hits is the target when
+            it is graspable.
+        rays: a ``RayScene`` of ``scene.client`` to reuse (it must hold every body a line may
+            meet); None: one of all the client's bodies is made and closed here.
         max_normal_angle_deg: rule 2's largest rim normal deviation, degrees.
 
     Returns:
-        A ContactResult of (N,) arrays; ``instance`` is k for ``graspable[k-1]``, 0 = none.
+        A ContactResult of (N,) arrays; ``instance`` is k for ``scene.graspable[k-1]``, 0 = none.
     """
-    pts, a, g_dir = checked_inputs(
-        points_cam, axes_cam, depth_m, mask, intrinsics, gravity_cam, cfg
-    )
-    graspable = [int(b) for b in graspable]
+    pts, a, g_dir = checked_inputs(points_cam, axes_cam, scene, cfg)
+    graspable = [int(b) for b in scene.graspable]
     n = len(pts)
     if targets is not None:
         targets = np.asarray(targets, np.int64).reshape(-1)
@@ -340,23 +346,10 @@ def evaluate_contacts_mesh(
         return out
     own = rays is None
     if own:
-        rays = RayScene(client)
+        rays = RayScene(scene.client)
     try:
         return _evaluate(
-            pts,
-            a,
-            depth_m,
-            mask,
-            intrinsics,
-            np.asarray(T_world_cam, np.float64),
-            client,
-            graspable,
-            g_dir,
-            cfg,
-            targets,
-            rays,
-            max_normal_angle_deg,
-            out,
+            pts, a, scene, graspable, g_dir, cfg, targets, rays, max_normal_angle_deg, out
         )
     finally:
         if own:
@@ -366,11 +359,7 @@ def evaluate_contacts_mesh(
 def _evaluate(
     pts,
     a,
-    depth_m,
-    mask,
-    intrinsics,
-    T_wc,
-    client,
+    scene: BodyScene,
     graspable,
     g_dir,
     cfg,
@@ -379,7 +368,9 @@ def _evaluate(
     max_angle_deg: float,
     out: ContactResult,
 ) -> ContactResult:
+    T_wc = np.asarray(scene.T_world_cam, np.float64)
     R_wc, t_wc = T_wc[:3, :3], T_wc[:3, 3]
+    client = scene.client
 
     # Rule 1: the centre line's first hit, against every body.
     start = pts - START_OFFSET * a
@@ -411,7 +402,7 @@ def _evaluate(
     pts3 = np.concatenate(
         [rim_start + s_rim[..., None] * a_on[:, None, :], hit0[:, None, :]], axis=1
     )  # (M, K + 1, 3)
-    occluded = occluded_contacts(pts3, inst, depth_m, mask, intrinsics, cfg)
+    occluded = occluded_contacts(pts3, inst, scene, cfg)
 
     # Rule 4: the body's weight against the soft contact's wrench limits.
     mass = np.array([p.getDynamicsInfo(int(b), -1, physicsClientId=client)[0] for b in tgt])
@@ -427,13 +418,7 @@ def _evaluate(
 def robust_quality_mesh(
     points_cam: np.ndarray,
     axes_cam: np.ndarray,
-    depth_m: np.ndarray,
-    mask: np.ndarray,
-    intrinsics: Intrinsics,
-    T_world_cam: np.ndarray,
-    client: int,
-    graspable: Sequence[int],
-    gravity_cam: np.ndarray,
+    scene: BodyScene,
     cfg: SuctionModelConfig,
     rng: np.random.Generator,
     *,
@@ -450,7 +435,8 @@ def robust_quality_mesh(
     ``evaluate_contacts_mesh``; a candidate's perturbations keep its target.
 
     Args:
-        points_cam ... max_normal_angle_deg: as for ``evaluate_contacts_mesh``.
+        points_cam, axes_cam, scene, cfg, targets, rays, max_normal_angle_deg: as for
+            ``evaluate_contacts_mesh``.
         rng: source of the perturbations; the same generator state gives the same result.
 
     Returns:
@@ -465,13 +451,7 @@ def robust_quality_mesh(
     result = evaluate_contacts_mesh(
         points.reshape(-1, 3),
         axes.reshape(-1, 3),
-        depth_m,
-        mask,
-        intrinsics,
-        T_world_cam,
-        client,
-        graspable,
-        gravity_cam,
+        scene,
         cfg,
         targets=targets,
         rays=rays,

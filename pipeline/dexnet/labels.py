@@ -17,6 +17,7 @@ from pipeline.dataset.storage import read_npz, write_npz
 from pipeline.dexnet.contact import (
     LABELLED_CANDIDATE_FIELDS,
     REASONS,
+    BoxScene,
     evaluate_contacts,
     robust_quality,
 )
@@ -46,10 +47,10 @@ def label_scene_candidates(scene: Scene, cfg, count: int) -> dict[str, np.ndarra
     model = suction_model_config(cfg, float(cfg.boxes.density))
     g = gravity_in_camera(scene.T_world_cam)
     # candidates come from what the sensor saw; their labels from the ideal depth (the geometry)
-    args = (scene.depth_clean_m, scene.mask, scene.intrinsics, scene.boxes, g, model)
+    truth = BoxScene(scene.depth_clean_m, scene.mask, scene.intrinsics, g, scene.boxes)
     if len(cands):
-        quality = robust_quality(cands.point, cands.axis, *args, rng=rng)
-        reason = evaluate_contacts(cands.point, cands.axis, *args).reason
+        quality = robust_quality(cands.point, cands.axis, truth, model, rng=rng)
+        reason = evaluate_contacts(cands.point, cands.axis, truth, model).reason
     else:
         quality, reason = np.zeros(0), np.zeros(0, np.int8)
     return {

@@ -32,12 +32,18 @@ from pipeline.camera.render import check_renderer, render_depth
 from pipeline.camera.sensor import apply_sensor_model
 from pipeline.cell.bin import build_cell
 from pipeline.dexnet.contact import LABELLED_CANDIDATE_FIELDS
-from pipeline.dexnet.contact_mesh import RayScene, evaluate_contacts_mesh, robust_quality_mesh
+from pipeline.dexnet.contact_mesh import (
+    BodyScene,
+    RayScene,
+    evaluate_contacts_mesh,
+    robust_quality_mesh,
+)
 from pipeline.dexnet.gqcnn import candidate_inputs
 from pipeline.dexnet.planner import crop_config, sampler_config, workspace
 from pipeline.dexnet.sampling import Candidates, point_cloud_image, sample_candidates
 from pipeline.grasping.suction import suction_model_config
 from pipeline.simulation.object_heap import ObjectHeap, drop_object_heap
+from pipeline.simulation.scene import instance_mask
 
 # An object heap's generator is seeded by (seed, OOD_SEED, split code, index): four numbers, so
 # it never equals a box heap's (seed, split code, index) (pipeline.simulation.scene.scene_rng).
@@ -108,19 +114,11 @@ def label_candidates(
     """
     if len(cands) == 0 or not graspable:
         return np.zeros(len(cands)), np.zeros(len(cands), np.int8)
-    args = (
-        depth_clean_m,
-        mask,
-        intrinsics,
-        T_world_cam,
-        client,
-        list(graspable),
-        gravity_in_camera(T_world_cam),
-        model,
-    )
+    g = gravity_in_camera(T_world_cam)
+    truth = BodyScene(depth_clean_m, mask, intrinsics, g, T_world_cam, client, list(graspable))
     with RayScene(client) as rays:
-        quality = robust_quality_mesh(cands.point, cands.axis, *args, rng, rays=rays)
-        reason = evaluate_contacts_mesh(cands.point, cands.axis, *args, rays=rays).reason
+        quality = robust_quality_mesh(cands.point, cands.axis, truth, model, rng, rays=rays)
+        reason = evaluate_contacts_mesh(cands.point, cands.axis, truth, model, rays=rays).reason
     return np.asarray(quality, np.float64), np.asarray(reason, np.int8)
 
 
@@ -155,31 +153,12 @@ def object_heap_scene(
     T_world_cam = camera_pose_above_bin(cfg.camera.height_above_bin_floor)
     ids = [o.body_id for o in heap.objects]
     ground = (-float(cfg.bin.floor_thickness), cell[0])
+    view = (client, intr, T_world_cam, cfg.camera.near, cfg.camera.far)
     if renderer == "raycast":
-        frame = render_convex_depth(
-            client,
-            intr,
-            T_world_cam,
-            cfg.camera.near,
-            cfg.camera.far,
-            ground=ground,
-            bodies=cell[1:] + ids,
-        )
+        frame = render_convex_depth(*view, ground=ground, bodies=cell[1:] + ids)
     else:
-        frame = render_depth(
-            client,
-            intr,
-            T_world_cam,
-            cfg.camera.near,
-            cfg.camera.far,
-            ground=ground,
-            renderer=renderer,
-        )
-    lut = np.zeros(int(frame.body_ids.max(initial=-1)) + 2, dtype=np.uint8)
-    for k, body in enumerate(ids, start=1):
-        if body + 1 < len(lut):
-            lut[body + 1] = k
-    mask = lut[frame.body_ids + 1]
+        frame = render_depth(*view, ground=ground, renderer=renderer)
+    mask = instance_mask(frame.body_ids, ids)
     unit = float(depth_unit)
     depth = _stored(apply_sensor_model(frame.depth_m, sensor_cfg, rng, intr), unit)
     depth_clean = _stored(frame.depth_m, unit)

@@ -47,7 +47,12 @@ from pipeline.dexnet.cem import CEMConfig, CEMResult, cross_entropy_method
 from pipeline.dexnet.gqcnn import GQCNN, CropConfig, GQCNNConfig, candidate_inputs, predict_quality
 from pipeline.dexnet.quality import PlanarityConfig, disc_planarity
 from pipeline.dexnet.sampling import Candidates, PointCloudImage, SamplerConfig, point_cloud_image
-from pipeline.planner.planner import ModelFileError, build_from_blob, read_model_file
+from pipeline.planner.planner import (
+    build_from_blob,
+    config_from_blob,
+    find_model_file,
+    read_model_file,
+)
 
 VARIANTS = ("gqcnn", "planarity")
 MODEL_FILE = "gqcnn.pt"
@@ -157,26 +162,14 @@ def workspace(cfg, T_world_cam: np.ndarray) -> Workspace:
 
 def load_gqcnn(model_dir: Path | str) -> tuple[GQCNN, CropConfig]:
     """The GQ-CNN and its crop config from a baseline artifact folder (or a ``gqcnn.pt``)."""
-    path = Path(model_dir)
-    path = path / MODEL_FILE if path.is_dir() else path
-    if not path.is_file():
-        raise FileNotFoundError(
-            f"{path} not found: give a baseline artifact folder "
-            "(data/baseline/<version>) made by `python -m pipeline.stages.baseline`"
-        )
+    path = find_model_file(model_dir, MODEL_FILE, "baseline", "data/baseline", "baseline")
     blob = read_model_file(
         path, MODEL_KEYS, "GQ-CNN (gqcnn.pt of `python -m pipeline.stages.baseline`)", REBUILD_FIX
     )
     net = build_from_blob(
         path, REBUILD_FIX, lambda: GQCNN(GQCNNConfig(**blob["network"])), blob["state_dict"]
     )
-    try:
-        crop = CropConfig(**blob["crop"])
-    except TypeError as exc:
-        raise ModelFileError(
-            f"{path}: its crop config does not fit this version of the "
-            f"pipeline ({exc}): {REBUILD_FIX}"
-        ) from None
+    crop = config_from_blob(path, REBUILD_FIX, "crop", lambda: CropConfig(**blob["crop"]))
     return net.eval(), crop
 
 

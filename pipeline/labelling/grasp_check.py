@@ -25,13 +25,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
 
 from pipeline.robot.approach import first_goal
 from pipeline.robot.model import Robot
-from pipeline.robot.path import check_motion, path_config
+from pipeline.robot.path import PathCheckConfig, check_motion, path_config
 from pipeline.robot.target_pose import hand_rotations, rotate_about, target_camera_pose
 from pipeline.robot.urdf_builder import CUP_TIP_Z
 from pipeline.servo.control import servo_config
@@ -103,6 +104,8 @@ def check_grasp(
     if path_cfg is not None and bin_clearance is not None:
         path_cfg = dataclasses.replace(path_cfg, bin_clearance=float(bin_clearance))
     home = robot.home_q()
+    surface_cam = (centre_cam, normal_cam, long_cam, short_cam)
+    bodies = (obstacle_ids, ignore_body_ids, bin_ids)
     first = None
     try:
         for rot in hand_rotations(pattern, hand_cfg.rotations_deg):
@@ -127,18 +130,13 @@ def check_grasp(
                     cfg,
                     home,
                     T_world_cam,
-                    centre_cam,
-                    normal_cam,
-                    long_cam,
-                    short_cam,
+                    surface_cam,
                     x_rot,
                     grasp[:3, 0],
                     pattern,
                     intrinsics,
                     path_cfg,
-                    obstacle_ids,
-                    ignore_body_ids,
-                    bin_ids,
+                    bodies,
                 )
             if reason is None:
                 return GraspCheck(None, grasp[:3, 0].copy(), poses)
@@ -171,26 +169,25 @@ def press_reason(
 
 
 def _path_reason(
-    robot,
+    robot: Robot,
     cfg,
-    home,
-    T_world_cam,
-    centre_cam,
-    normal_cam,
-    long_cam,
-    short_cam,
-    x_cam,
-    x_world,
-    pattern,
+    home: np.ndarray,
+    T_world_cam: np.ndarray,
+    surface_cam: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    x_cam: np.ndarray,
+    x_world: np.ndarray,
+    pattern: str,
     intrinsics,
-    path_cfg,
-    obstacle_ids,
-    ignore_body_ids,
-    bin_ids,
-):
+    path_cfg: PathCheckConfig,
+    bodies: tuple[Sequence[int], Sequence[int], Sequence[int]],
+) -> tuple[str | None, list]:
     """(None when the servo from home, predicted on the exact surface, converges and its motion
     passes, else "path_" + the servo's or the motion check's reason; the predicted camera
-    poses)."""
+    poses). ``surface_cam``: :func:`check_grasp`'s (centre, normal, long axis, short axis),
+    (3,) each, home camera frame, m; ``x_cam`` (home camera frame) and ``x_world`` the hand's
+    X axis of the rotation checked; ``bodies``: :func:`check_grasp`'s (obstacle_ids,
+    ignore_body_ids, bin_ids)."""
+    centre_cam, normal_cam, long_cam, short_cam = surface_cam
     servo = servo_config(cfg)
     goal, _ = first_goal(
         servo, cfg, T_world_cam, centre_cam, normal_cam, x_cam, pattern, intrinsics
@@ -215,7 +212,5 @@ def _path_reason(
     )
     if motion.reason is not None:
         return "path_" + motion.reason, motion.poses
-    path = check_motion(
-        robot, motion.q, motion.poses, path_cfg, obstacle_ids, ignore_body_ids, bin_ids
-    )
+    path = check_motion(robot, motion.q, motion.poses, path_cfg, *bodies)
     return (None if path.ok else "path_" + path.reason), motion.poses

@@ -9,16 +9,15 @@ not an obstacle (the cups are meant to touch it).
 
 from __future__ import annotations
 
-import numpy as np
 import pybullet as p
 
-from pipeline.camera.geometry import quat_from_matrix
 from pipeline.cell.bin import build_cell
 from pipeline.dataset.scenes import Scene
 from pipeline.grasping.hand import HandLabel
 from pipeline.grasping.types import Surface
 from pipeline.labelling.grasp_check import check_grasp
 from pipeline.robot.model import Robot, robot_config
+from pipeline.simulation.scene import collision_box
 
 
 class RobotChecker:
@@ -41,18 +40,7 @@ class RobotChecker:
         cell = build_cell(self.client, bin_cfg, cfg.physics)
         self.box_bodies: dict[int, int] = {}
         for box in scene.boxes:
-            half = (np.asarray(box.size) / 2).tolist()
-            col = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=self.client)
-            T = box.T_world_box
-            body = p.createMultiBody(
-                0.0,
-                col,
-                -1,
-                basePosition=T[:3, 3].tolist(),
-                baseOrientation=quat_from_matrix(T[:3, :3]).tolist(),
-                physicsClientId=self.client,
-            )
-            self.box_bodies[box.instance] = body
+            self.box_bodies[box.instance] = collision_box(self.client, box.size, box.T_world_box)
         self.robot.load(self.client, ground_z=-bin_cfg.floor_thickness)
         self.obstacles = list(cell) + list(self.box_bodies.values())
         self.bin_ids = list(cell[1:])  # bin floor and walls (not the ground)

@@ -27,6 +27,7 @@ import dataclasses
 import math
 from collections.abc import Callable
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 import torch
@@ -40,6 +41,8 @@ from pipeline.planner.decode import decode_output, second_chance
 from pipeline.planner.network import GraspNet, NetworkConfig
 from pipeline.planner.normalisation import Normalisation, normalise_depth
 from pipeline.planner.ranking import GraspCandidate, RankingConfig, rank_grasps
+
+T = TypeVar("T")
 
 MODEL_FILE = "model.pt"
 MODEL_KEYS = ("state_dict", "network", "normalisation", "ranking")
@@ -57,6 +60,22 @@ NO_GRASP_REASONS = (NO_VALID_DEPTH, NO_PREDICTION, NO_RANKABLE_CANDIDATE)
 
 class ModelFileError(ValueError):
     """A model file that this version of the pipeline cannot load."""
+
+
+def find_model_file(
+    model_dir: Path | str, file_name: str, kind: str, folder: str, stage: str
+) -> Path:
+    """The model file ``file_name`` in the artifact folder ``model_dir``, or ``model_dir`` itself
+    when it is not a folder. ``FileNotFoundError`` when there is no such file, naming what to
+    give: a ``kind`` artifact folder (``folder``/<version>) made by ``pipeline.stages.<stage>``."""
+    path = Path(model_dir)
+    path = path / file_name if path.is_dir() else path
+    if not path.is_file():
+        raise FileNotFoundError(
+            f"{path} not found: give a {kind} artifact folder "
+            f"({folder}/<version>) made by `python -m pipeline.stages.{stage}`"
+        )
+    return path
 
 
 def read_model_file(path: Path, keys: tuple[str, ...], what: str, fix: str) -> dict:
@@ -87,6 +106,18 @@ def read_model_file(path: Path, keys: tuple[str, ...], what: str, fix: str) -> d
             f"): {fix}"
         )
     return blob
+
+
+def config_from_blob(path: Path, fix: str, what: str, build: Callable[[], T]) -> T:
+    """``build()`` the ``what`` config(s) a model file holds beside its network (e.g.
+    ``CropConfig(**blob["crop"])``); a ``TypeError`` there (fields this version does not know,
+    or lacks) is a ``ModelFileError`` naming the file, ``what`` and the ``fix``."""
+    try:
+        return build()
+    except TypeError as exc:
+        raise ModelFileError(
+            f"{path}: its {what} config does not fit this version of the pipeline ({exc}): {fix}"
+        ) from None
 
 
 def build_from_blob(
@@ -169,13 +200,7 @@ class Planner:
     @classmethod
     def load(cls, model_dir: Path | str, device: str = "cpu") -> Planner:
         """From a training artifact folder (or a ``model.pt`` path)."""
-        path = Path(model_dir)
-        path = path / MODEL_FILE if path.is_dir() else path
-        if not path.is_file():
-            raise FileNotFoundError(
-                f"{path} not found: give a training artifact folder "
-                "(models/train/<version>) made by `python -m pipeline.stages.train`"
-            )
+        path = find_model_file(model_dir, MODEL_FILE, "training", "models/train", "train")
         what = "grasp planner model (model.pt of `python -m pipeline.stages.train`)"
         blob = read_model_file(path, MODEL_KEYS, what, RETRAIN_FIX)
         net = build_from_blob(
@@ -184,14 +209,12 @@ class Planner:
             lambda: GraspNet(NetworkConfig(**blob["network"])),
             blob["state_dict"],
         )
-        try:
-            norm = Normalisation(**blob["normalisation"])
-            ranking = RankingConfig(**blob["ranking"])
-        except TypeError as exc:
-            raise ModelFileError(
-                f"{path}: its normalisation/ranking config does not fit this "
-                f"version of the pipeline ({exc}): {RETRAIN_FIX}"
-            ) from None
+        norm, ranking = config_from_blob(
+            path,
+            RETRAIN_FIX,
+            "normalisation/ranking",
+            lambda: (Normalisation(**blob["normalisation"]), RankingConfig(**blob["ranking"])),
+        )
         return cls(net, norm, ranking, device)
 
     def _check(self, depth_m: np.ndarray, batch: bool = True) -> np.ndarray:

@@ -13,20 +13,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from pipeline.artifacts import ArtifactError
 from pipeline.report.section import Context, Section
-from pipeline.report.tables import (
-    Table,
-    book_columns,
-    end_columns,
-    failure_columns,
-    integer,
-    pph_column,
-    reason_column,
-    table_of,
-    text_column,
-)
-from pipeline.report.upstream import ArtifactInfo, resolve_upstream
+from pipeline.report.tables import Table, integer, table_of, text_column, trial_columns
+from pipeline.report.upstream import ArtifactInfo, lacks_metrics, resolve_upstream
 
 ABLATION_SECTION = "Ablation: what each execution extension contributes"
 ABLATION_NOT_RUN = "Ablation: not run yet (`make ablation`)."
@@ -54,10 +43,7 @@ class AblationInfo(ArtifactInfo):
         """Raises ``ArtifactError`` when the manifest lacks the rows."""
         rows = (manifest.get("metrics") or {}).get("ablation")
         if not isinstance(rows, list):
-            raise ArtifactError(
-                f"{folder.name}/manifest.json (ablation) lacks metrics.ablation; "
-                "recompute it with `make ablation` (ablation.force=true)."
-            )
+            raise lacks_metrics(folder, "ablation", "metrics.ablation")
         return cls(folder, manifest)
 
 
@@ -73,11 +59,7 @@ def ablation_table(rows: list[dict]) -> Table:
         text_column("planner", "planner"),
         text_column("variant", "variant"),
         text_column("overrides", "overrides"),
-        *book_columns(),
-        pph_column("PPH (motion)"),
-        *failure_columns(),
-        *end_columns(),
-        reason_column(),
+        *trial_columns("PPH (motion)"),
     ]
     return table_of("ablation", columns, rows, text_columns=3)
 
@@ -88,15 +70,12 @@ def _meanings(rows: list[dict]) -> dict[str, str]:
     return {r["variant"]: r.get("meaning") or f"`{r['overrides']}`" for r in rows}
 
 
-def render_ablation(info: AblationInfo | None, tables: dict[str, Table]) -> list[str]:
+def render_ablation(info: AblationInfo, tables: dict[str, Table]) -> list[str]:
     """README lines of the ablation section."""
-    out = [f"## {ABLATION_SECTION}", ""]
-    if info is None:
-        return out + [ABLATION_NOT_RUN, ""]
     boxes = sorted({integer(r.get("boxes")) for r in info.rows} - {None})
     trials = info.trials
     knowledge = any(r.get("variant") == SIMULATOR_KNOWLEDGE for r in info.rows)
-    out += [
+    return [
         f"Ablation artifact `{info.version}` (`python -m pipeline.stages.ablation`): "
         "each extension "
         "of the closed loop turned off on its own, then all at once, every run on the "
@@ -124,11 +103,10 @@ def render_ablation(info: AblationInfo | None, tables: dict[str, Table]) -> list
         "CSV version: [tables/ablation.csv](tables/ablation.csv).",
         "",
     ]
-    return out
 
 
 class AblationSection(Section):
-    name = "ablation"
+    name, heading, not_run = "ablation", ABLATION_SECTION, ABLATION_NOT_RUN
 
     def resolve(self, ctx: Context) -> AblationInfo | None:
         return resolve_ablation(ctx.root, ctx.requested("ablation"))
@@ -136,8 +114,8 @@ class AblationSection(Section):
     def tables(self, info: AblationInfo, ctx: Context) -> list[Table]:
         return [ablation_table(info.rows)]
 
-    def markdown(
-        self, info: AblationInfo | None, tables: dict[str, Table], figures: dict[str, str]
+    def body(
+        self, info: AblationInfo, tables: dict[str, Table], figures: dict[str, str]
     ) -> list[str]:
         return render_ablation(info, tables)
 

@@ -14,12 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.artifacts import ArtifactError
 from pipeline.dataset.storage import read_npz
 from pipeline.report.figures import figure_planner_points, figure_table2_curve
 from pipeline.report.section import Context, Section
 from pipeline.report.tables import Table
-from pipeline.report.upstream import ArtifactInfo, Match, resolve_upstream
+from pipeline.report.upstream import ArtifactInfo, Match, lacks_metrics, resolve_upstream
 
 TABLE2_SECTION = "Table 2: grasp points near surface centres, ours vs. Dex-Net (Sec. 8.1.1)"
 BASELINE_NOT_RUN = "Dex-Net-style comparison: not run yet (`make baseline`)."
@@ -40,10 +39,7 @@ class BaselineInfo(ArtifactInfo):
         except (KeyError, TypeError):
             complete = False
         if not complete:
-            raise ArtifactError(
-                f"{folder.name}/manifest.json (baseline) lacks metrics.table2; "
-                "recompute it with `make baseline` (baseline.force=true)."
-            )
+            raise lacks_metrics(folder, "baseline", "metrics.table2")
         return cls(folder, manifest)
 
 
@@ -142,22 +138,16 @@ def planning_time_table(info: BaselineInfo) -> Table:
         for k, v in times.items()
         if v
     ]
-    return Table(
-        "planning_time",
-        ["planner", "mean (ms)", "median (ms)", "90th pct. (ms)"],
-        rows,
-        ["", "{:.1f}", "{:.1f}", "{:.1f}"],
-        csv_formats=["", "", "", ""],
-    )
+    headers = ["planner", "mean (ms)", "median (ms)", "90th pct. (ms)"]
+    formats = ["", "{:.1f}", "{:.1f}", "{:.1f}"]
+    return Table("planning_time", headers, rows, formats, csv_formats=[""] * len(headers))
 
 
 def render_baseline(
-    info: BaselineInfo | None, tables: dict[str, Table], figures: dict[str, str]
+    info: BaselineInfo, tables: dict[str, Table], figures: dict[str, str]
 ) -> list[str]:
     """README lines of the Table 2 section."""
-    out = [f"## {TABLE2_SECTION}", ""]
-    if info is None:
-        return out + [BASELINE_NOT_RUN, ""]
+    out: list[str] = []
     m = info.metrics
     cfg = info.manifest.get("config", {})
     g = m.get("gqcnn", {})
@@ -231,12 +221,11 @@ def _ood_lines(metrics: dict) -> list[str]:
 
 class BaselineSection(Section):
     name = "baseline"
+    not_run = BASELINE_NOT_RUN
     paper_table = (
-        "Table 2 (optimal grasp points within 30 pixels of a surface centre, ours vs. "
-        f'Dex-Net) is reported above, in "{TABLE2_SECTION}". ',
-        "Table 2 (ours vs. Dex-Net) will appear above once the baseline stage has run "
-        "(`make baseline`). ",
+        "Table 2 (optimal grasp points within 30 pixels of a surface centre, ours vs. Dex-Net)"
     )
+    heading = TABLE2_SECTION
 
     def resolve(self, ctx: Context) -> BaselineInfo | None:
         return resolve_baseline(
@@ -277,7 +266,7 @@ class BaselineSection(Section):
             )
         return figures
 
-    def markdown(
-        self, info: BaselineInfo | None, tables: dict[str, Table], figures: dict[str, str]
+    def body(
+        self, info: BaselineInfo, tables: dict[str, Table], figures: dict[str, str]
     ) -> list[str]:
         return render_baseline(info, tables, figures)

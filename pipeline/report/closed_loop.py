@@ -17,7 +17,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from pipeline.artifacts import ArtifactError
 from pipeline.report.ablation import SIMULATOR_KNOWLEDGE, AblationInfo, resolve_ablation
 from pipeline.report.ablation import SPLIT as DEV_SPLIT
 from pipeline.report.figures import figure_servo_convergence
@@ -33,10 +32,11 @@ from pipeline.report.tables import (
     number,
     pph_column,
     reason_column,
+    spread_column,
     table_of,
     text_column,
 )
-from pipeline.report.upstream import ArtifactInfo, resolve_upstream
+from pipeline.report.upstream import ArtifactInfo, lacks_metrics, resolve_upstream
 
 TABLE3_SECTION = "Table 3: closed-loop bin-picking (Secs. 5, 6)"
 EVALUATE_NOT_RUN = "Closed-loop evaluation: not run yet (`make evaluate`)."
@@ -79,10 +79,7 @@ class EvaluateInfo(ArtifactInfo):
     def load(cls, folder: Path, manifest: dict) -> EvaluateInfo:
         """Raises ``ArtifactError`` when the manifest lacks Table 3."""
         if not (manifest.get("metrics") or {}).get("table3"):
-            raise ArtifactError(
-                f"{folder.name}/manifest.json (evaluate) lacks metrics.table3; "
-                "recompute it with `make evaluate` (evaluate.force=true)."
-            )
+            raise lacks_metrics(folder, "evaluate", "metrics.table3")
         return cls(folder, manifest)
 
 
@@ -184,17 +181,8 @@ def table3_table(info: ArtifactInfo, ablation: AblationInfo | None = None) -> Ta
     robot's simulated motion, why a row made no attempt. CSV: the split and trials in columns
     of their own, rates and interval bounds in percent."""
     rows = paper_rows(info) + evaluation_rows(info) + dev_rows(ablation)
-    source = Column(
-        "",
-        lambda r: r["source"],
-        csv=(
-            ("source", lambda r: r["source"], ""),
-            ("split", lambda r: r.get("split"), ""),
-            ("trials", lambda r: r.get("trials"), ""),
-        ),
-    )
     columns = [
-        source,
+        spread_column("", "source", ("source", "split", "trials")),
         Column("system", _system),
         Column("hand", lambda r: r.get("hand") or _hand(r["planner"])),
         *book_columns(),
@@ -214,18 +202,9 @@ def failures_table(info: ArtifactInfo, ablation: AblationInfo | None = None) -> 
     def tier(key: str):
         return lambda r: int(r[key]) if r["planner"] == "dcnn" and key in r else None
 
-    heaps = Column(
-        "heaps",
-        lambda r: r["heaps"],
-        csv=(
-            ("split", lambda r: r["split"], ""),
-            ("trials", lambda r: r.get("trials"), ""),
-            ("variant", lambda r: r["variant"], ""),
-        ),
-    )
     columns = [
         text_column("planner", "planner"),
-        heaps,
+        spread_column("heaps", "heaps", ("split", "trials", "variant")),
         *failure_columns(),
         count_column("success on another box", "wrong_target"),
         *end_columns(),
@@ -415,13 +394,11 @@ def _timing_note(cfg: dict) -> str:
 
 
 def render_evaluate(
-    info: EvaluateInfo | None, tables: dict[str, Table], ablation: AblationInfo | None = None
+    info: EvaluateInfo, tables: dict[str, Table], ablation: AblationInfo | None = None
 ) -> list[str]:
     """README lines of the Table 3 section (``ablation``: the artifact whose dev rows Table 3
     shows, None: none)."""
-    out = [f"## {TABLE3_SECTION}", ""]
-    if info is None:
-        return out + [EVALUATE_NOT_RUN, ""]
+    out: list[str] = []
     cfg = info.manifest.get("config", {})
     ev = cfg.get("evaluate") or {}
     split = split_of(info.manifest)
@@ -491,11 +468,8 @@ def render_evaluate(
 
 class ClosedLoopSection(Section):
     name = "evaluate"
-    paper_table = (
-        f'Table 3 (bin-picking success rate and speed) is reported above, in "{TABLE3_SECTION}".',
-        "Table 3 (bin-picking success rate and speed) will appear above once the "
-        "closed-loop evaluation has run (`make evaluate`).",
-    )
+    not_run = EVALUATE_NOT_RUN
+    paper_table, heading = "Table 3 (bin-picking success rate and speed)", TABLE3_SECTION
 
     def resolve(self, ctx: Context) -> EvaluateInfo | None:
         return resolve_evaluate(ctx.root, ctx.requested("evaluate"))
@@ -534,7 +508,7 @@ class ClosedLoopSection(Section):
             )
         }
 
-    def markdown(
-        self, info: EvaluateInfo | None, tables: dict[str, Table], figures: dict[str, str]
+    def body(
+        self, info: EvaluateInfo, tables: dict[str, Table], figures: dict[str, str]
     ) -> list[str]:
         return render_evaluate(info, tables, info.ablation if info is not None else None)

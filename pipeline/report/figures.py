@@ -69,6 +69,50 @@ def _depth_range(scenes) -> tuple[float, float]:
     return vmin, (vmax if vmax > vmin else vmin + 1e-3)
 
 
+def _empty_figure(text: str, path: Path) -> None:
+    """A small figure that says why there is nothing to draw."""
+    fig = Figure(figsize=(6.0, 2.0), dpi=FIG_DPI)
+    fig.text(0.5, 0.5, text, ha="center", va="center")
+    _save(fig, path)
+
+
+def _depth_grid(scenes) -> tuple[Figure, list]:
+    """A figure of the scenes' depth images, three a row on one grey scale (light = near,
+    ``NO_DATA`` where there is no depth), each axes' limits the image's pixels; returns the
+    figure and one axes a scene, in order."""
+    vmin, vmax = _depth_range(scenes)
+    per_row = min(3, len(scenes))
+    rows = math.ceil(len(scenes) / per_row)
+    fig = Figure(figsize=(3.3 * per_row, 3.3 * rows + 0.9), dpi=FIG_DPI, layout="constrained")
+    axes = fig.subplots(rows, per_row, squeeze=False).ravel()
+    cmap = matplotlib.colormaps["gray_r"].with_extremes(bad=NO_DATA)  # near = light
+    for ax in axes:
+        ax.set_axis_off()
+    for ax, scene in zip(axes, scenes):
+        H, W = scene.depth_m.shape
+        depth = np.where(scene.depth_m > 0, scene.depth_m, np.nan)
+        ax.imshow(depth, cmap=cmap, vmin=vmin, vmax=vmax, interpolation="nearest")
+        ax.set_xlim(-0.5, W - 0.5)
+        ax.set_ylim(H - 0.5, -0.5)
+    return fig, list(axes[: len(scenes)])
+
+
+def _marker_handle(marker: str, colour, label: str, size: float):
+    """A legend entry of one marker (black edge) and no line."""
+    from matplotlib.lines import Line2D
+
+    return Line2D(
+        [],
+        [],
+        linestyle="",
+        marker=marker,
+        markersize=size,
+        color=colour,
+        label=label,
+        markeredgecolor="black",
+    )
+
+
 def sample_split(gen_dir: Path) -> str | None:
     """The split the sample figure draws from: test, else train, else val (None = no scenes)."""
     for split in ("test", "train", "val"):
@@ -83,9 +127,7 @@ def figure_sample_depth(gen_dir: Path, num: int, path: Path) -> tuple[str | None
     ds = SceneDataset(gen_dir, split) if split else None
     n = min(num, len(ds)) if ds is not None else 0
     if n == 0:
-        fig = Figure(figsize=(6.0, 2.0), dpi=FIG_DPI)
-        fig.text(0.5, 0.5, "no scenes in the generation artifact", ha="center", va="center")
-        _save(fig, path)
+        _empty_figure("no scenes in the generation artifact", path)
         return split, 0
     scenes = [ds[i] for i in range(n)]
     vmin, vmax = _depth_range(scenes)
@@ -164,40 +206,20 @@ def figure_labels_sample(
     Draws the first ``num`` scenes of the test split (else train, else val) with the labels of
     the label artifact ``label_dir``; returns (split, images drawn).
     """
-    from matplotlib.lines import Line2D
-
     split = sample_split(gen_dir)
     n = min(num, len(SceneDataset(gen_dir, split))) if split else 0
     if n == 0:
-        fig = Figure(figsize=(6.0, 2.0), dpi=FIG_DPI)
-        fig.text(0.5, 0.5, "no labelled scenes", ha="center", va="center")
-        _save(fig, path)
+        _empty_figure("no labelled scenes", path)
         return split, 0
     ds, ls = SceneDataset(gen_dir, split), LabelSet(label_dir, split)
     scenes = [ds[i] for i in range(n)]
-    vmin, vmax = _depth_range(scenes)
-    per_row = min(3, n)
-    rows = math.ceil(n / per_row)
-    fig = Figure(figsize=(3.3 * per_row, 3.3 * rows + 0.9), dpi=FIG_DPI, layout="constrained")
-    axes = fig.subplots(rows, per_row, squeeze=False)
-    cmap = matplotlib.colormaps["gray_r"].with_extremes(bad=NO_DATA)  # near = light
+    fig, axes = _depth_grid(scenes)
     colours = {c: tuple(v / 255 for v in CLASS_COLORS[c]) for c in GraspClass}
     totals = np.zeros(len(GraspClass), dtype=np.int64)
-    for ax in axes.ravel():
-        ax.set_axis_off()
-    for i, scene in enumerate(scenes):
-        ax = axes.ravel()[i]
+    for i, (ax, scene) in enumerate(zip(axes, scenes)):
         rows_i = ls[i]
         uv, cls = rows_i["uv"], rows_i["grasp_class"].astype(np.int64)
         totals += np.bincount(cls, minlength=len(GraspClass))
-        H, W = scene.depth_m.shape
-        ax.imshow(
-            np.where(scene.depth_m > 0, scene.depth_m, np.nan),
-            cmap=cmap,
-            vmin=vmin,
-            vmax=vmax,
-            interpolation="nearest",
-        )
         for c in GraspClass:
             sel = cls == c
             if sel.any():
@@ -210,20 +232,9 @@ def figure_labels_sample(
                     linewidths=0.6,
                     zorder=3,
                 )
-        ax.set_xlim(-0.5, W - 0.5)
-        ax.set_ylim(H - 0.5, -0.5)
         ax.set_title(f"{split} #{scene.index}: {len(cls)} grasp points", fontsize=8)
     handles = [
-        Line2D(
-            [],
-            [],
-            linestyle="",
-            marker="o",
-            markersize=7,
-            color=colours[c],
-            markeredgecolor="black",
-            label=f"{c.name}: {CLASS_MEANING[c]} ({totals[c]})",
-        )
+        _marker_handle("o", colours[c], f"{c.name}: {CLASS_MEANING[c]} ({totals[c]})", 7)
         for c in GraspClass
     ]
     fig.legend(
@@ -322,35 +333,15 @@ def figure_planner_points(
     """Fig. 10-like: test depth images with every planner's optimal grasp point and the true
     surface centres (white crosses). ``chosen``: the baseline's ``chosen.npz``. Returns the
     number of images drawn."""
-    from matplotlib.lines import Line2D
-
     ds = SceneDataset(gen_dir, "test")
     n = min(num, len(chosen["scene_index"]), len(ds))
     if n == 0:
-        fig = Figure(figsize=(6.0, 2.0), dpi=FIG_DPI)
-        fig.text(0.5, 0.5, "no test images", ha="center", va="center")
-        _save(fig, path)
+        _empty_figure("no test images", path)
         return 0
     scenes = [ds[int(chosen["scene_index"][i])] for i in range(n)]
     starts = np.concatenate([[0], np.cumsum(chosen["num_centres"])])
-    vmin, vmax = _depth_range(scenes)
-    per_row = min(3, n)
-    rows = math.ceil(n / per_row)
-    fig = Figure(figsize=(3.3 * per_row, 3.3 * rows + 0.9), dpi=FIG_DPI, layout="constrained")
-    axes = fig.subplots(rows, per_row, squeeze=False)
-    cmap = matplotlib.colormaps["gray_r"].with_extremes(bad=NO_DATA)
-    for ax in axes.ravel():
-        ax.set_axis_off()
-    for i, scene in enumerate(scenes):
-        ax = axes.ravel()[i]
-        H, W = scene.depth_m.shape
-        ax.imshow(
-            np.where(scene.depth_m > 0, scene.depth_m, np.nan),
-            cmap=cmap,
-            vmin=vmin,
-            vmax=vmax,
-            interpolation="nearest",
-        )
+    fig, axes = _depth_grid(scenes)
+    for i, (ax, scene) in enumerate(zip(axes, scenes)):
         centres = chosen["centres"][starts[i] : starts[i + 1]]
         ax.scatter(centres[:, 0], centres[:, 1], marker="+", s=30, color="white", lw=1.0, zorder=3)
         for name in planners:
@@ -367,33 +358,11 @@ def figure_planner_points(
                     linewidths=0.7,
                     zorder=4,
                 )
-        ax.set_xlim(-0.5, W - 0.5)
-        ax.set_ylim(H - 0.5, -0.5)
         ax.set_title(f"test #{scene.index}", fontsize=8)
-    handles = [
-        Line2D(
-            [],
-            [],
-            linestyle="",
-            marker="+",
-            markersize=8,
-            color="black",
-            label="true surface centres",
-        )
-    ]
-    handles += [
-        Line2D(
-            [],
-            [],
-            linestyle="",
-            marker=PLANNER_STYLE.get(p, ("k", ".", p))[1],
-            markersize=8,
-            color=PLANNER_STYLE.get(p, ("black", ".", p))[0],
-            markeredgecolor="black",
-            label=PLANNER_STYLE.get(p, ("k", ".", p))[2],
-        )
-        for p in planners
-    ]
+    handles = [_marker_handle("+", "black", "true surface centres", 8)]
+    for p in planners:
+        colour, marker, label = PLANNER_STYLE.get(p, ("black", ".", p))
+        handles.append(_marker_handle(marker, colour, label, 8))
     fig.legend(handles=handles, loc="outside lower center", ncols=len(handles), fontsize=8)
     fig.suptitle("Optimal grasp points of each planner (paper Fig. 10; light = near)", fontsize=9)
     _save(fig, path)
@@ -458,9 +427,7 @@ def figure_sensor_depth(
 
     ds = SceneDataset(gen_dir, "test")
     if len(ds) == 0:
-        fig = Figure(figsize=(6.0, 2.0), dpi=FIG_DPI)
-        fig.text(0.5, 0.5, "no test images", ha="center", va="center")
-        _save(fig, path)
+        _empty_figure("no test images", path)
         return None
     scene = ds[0]
     panels = (

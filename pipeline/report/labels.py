@@ -64,19 +64,19 @@ NG_REASON_MEANING = {
     "or the arm onto the bin",
 }
 # (manifest key, column header, Markdown format) of the surface-accuracy table.
+# The counts, precision and recall, then each error's median and 90th percentile.
 ACCURACY_COLUMNS = (
-    ("images", "images", ""),
-    ("found", "found", ""),
-    ("missed", "missed", ""),
-    ("spurious", "spurious", ""),
-    ("precision", "precision", "{:.3f}"),
-    ("recall", "recall", "{:.3f}"),
-    ("center_err_px_median", "centre error median (px)", "{:.3f}"),
-    ("center_err_px_p90", "centre error p90 (px)", "{:.3f}"),
-    ("center_err_mm_median", "centre error median (mm)", "{:.3f}"),
-    ("center_err_mm_p90", "centre error p90 (mm)", "{:.3f}"),
-    ("normal_err_deg_median", "normal error median (deg)", "{:.3f}"),
-    ("normal_err_deg_p90", "normal error p90 (deg)", "{:.3f}"),
+    *((key, key, "") for key in ("images", "found", "missed", "spurious")),
+    *((key, key, "{:.3f}") for key in ("precision", "recall")),
+    *(
+        (f"{key}_{stat}", f"{name} {stat} ({unit})", "{:.3f}")
+        for key, name, unit in (
+            ("center_err_px", "centre error", "px"),
+            ("center_err_mm", "centre error", "mm"),
+            ("normal_err_deg", "normal error", "deg"),
+        )
+        for stat in ("median", "p90")
+    ),
 )
 SPLIT_KEYS = (
     "scenes",
@@ -233,13 +233,9 @@ def surface_accuracy_table(labels: LabelInfo) -> Table:
     return Table("surface_accuracy", headers, rows, formats, csv_formats=[""] * len(headers))
 
 
-def render_labels(
-    labels: LabelInfo | None, tables: dict[str, Table], figure: str | None
-) -> list[str]:
+def render_labels(labels: LabelInfo, tables: dict[str, Table], figure: str | None) -> list[str]:
     """README lines of the labels section (``figure``: the sample-labels figure, if drawn)."""
-    out = [f"## {LABEL_SECTION}", ""]
-    if labels is None:
-        return out + [LABEL_NOT_RUN, ""]
+    out: list[str] = []
     cfg = labels.manifest.get("config", {})
     robot_checks = (cfg.get("label") or {}).get("robot_checks", True)
     surf = cfg.get("surfaces") or {}
@@ -304,7 +300,7 @@ def render_labels(
 
 
 class LabelsSection(Section):
-    name = "label"
+    name, heading, not_run = "label", LABEL_SECTION, LABEL_NOT_RUN
 
     def resolve(self, ctx: Context) -> LabelInfo | None:
         return resolve_labels(ctx.root, ctx.requested("label"), ctx.version("generate"))
@@ -333,9 +329,7 @@ class LabelsSection(Section):
             )
         }
 
-    def markdown(
-        self, info: LabelInfo | None, tables: dict[str, Table], figures: dict[str, str]
-    ) -> list[str]:
+    def body(self, info: LabelInfo, tables: dict[str, Table], figures: dict[str, str]) -> list[str]:
         return render_labels(info, tables, LABEL_FIGURE if LABEL_FIGURE in figures else None)
 
     def metrics(self, info: LabelInfo | None) -> dict[str, Any]:

@@ -75,7 +75,7 @@ def render_readme(
         "## Paper tables",
         "",
         "".join(
-            section.paper_table[0 if info is not None else 1]
+            section.paper_table_sentence(info)
             for section, info in parts
             if section.paper_table is not None
         ),

@@ -29,17 +29,13 @@ from pipeline.report.section import Context, Section
 from pipeline.report.tables import (
     Column,
     Table,
-    book_columns,
     count_column,
-    end_columns,
-    failure_columns,
     integer,
     number,
-    pph_column,
-    reason_column,
     table_of,
     text_column,
     times,
+    trial_columns,
     within_key,
 )
 from pipeline.report.training import TABLE1_COLUMNS, TABLE1_SECTION
@@ -209,11 +205,7 @@ def closed_loop_columns() -> list[Column]:
         Column("overrides", lambda r: str(r.get("overrides") or "-")),
         text_column("split", "split"),
         count_column("trials", "trials"),
-        *book_columns(),
-        pph_column(),
-        *failure_columns(),
-        *end_columns(),
-        reason_column(),
+        *trial_columns(),
     ]
 
 
@@ -337,36 +329,36 @@ def _closed_loop_note(rows: list[dict], trials: Any) -> str:
         return [f"`{r.get('variant')}`" for r in mine], each
 
     out = [head + ", each on one split of the evaluation's heaps (its `split` column)."]
-    dev, each = part("dev")
-    if dev:
-        out.append(
-            f"The {len(dev)} dev variants"
-            + (f" ({each})" if each else "")
-            + " share the heaps development used and differ only in the overrides "
-            "shown: they compare the variants."
-        )
-    test, each = part("test")
-    if test:
-        out.append(
-            f"The test variants ({', '.join(test)}"
-            + (f"; {each}" if each else "")
-            + ") run on Table 3's test heaps, which nothing is chosen on: the headline "
-            "figures on this sensor."
-        )
+    # split -> (its sentence, how the trials per variant join it)
+    sentences = {
+        "dev": (
+            "The {n} dev variants{each} share the heaps development used and differ only in the "
+            "overrides shown: they compare the variants.",
+            " ({})",
+        ),
+        "test": (
+            "The test variants ({names}{each}) run on Table 3's test heaps, which nothing is "
+            "chosen on: the headline figures on this sensor.",
+            "; {}",
+        ),
+    }
+    for split, (sentence, joined) in sentences.items():
+        names, each = part(split)
+        if names:
+            each = joined.format(each) if each else ""
+            out.append(sentence.format(n=len(names), names=", ".join(names), each=each))
     return " ".join(out)
 
 
 def render_robustness(
-    info: RobustnessInfo | None,
+    info: RobustnessInfo,
     tables: dict[str, Table],
     figure: str | None,
     figure_note: str | None = None,
 ) -> list[str]:
     """README lines of the robustness section (``figure``: the depth figure, if drawn;
     ``figure_note``: why it was not)."""
-    out = [f"## {ROBUSTNESS_SECTION}", ""]
-    if info is None:
-        return out + [ROBUSTNESS_NOT_RUN, ""]
+    out: list[str] = []
     sensor = info.data["sensor"].get("name", _study_config(info).get("sensor"))
     out += [
         _intro(info, sensor),
@@ -474,7 +466,7 @@ def _intro(info: RobustnessInfo, sensor: str) -> str:
 
 
 class RobustnessSection(Section):
-    name = "robustness"
+    name, heading, not_run = "robustness", ROBUSTNESS_SECTION, ROBUSTNESS_NOT_RUN
 
     def resolve(self, ctx: Context) -> RobustnessInfo | None:
         return resolve_robustness(ctx.root, ctx.requested("robustness"))
@@ -525,8 +517,8 @@ class RobustnessSection(Section):
             )
         }
 
-    def markdown(
-        self, info: RobustnessInfo | None, tables: dict[str, Table], figures: dict[str, str]
+    def body(
+        self, info: RobustnessInfo, tables: dict[str, Table], figures: dict[str, str]
     ) -> list[str]:
         if info is not None and ROBUSTNESS_FIGURE not in figures:
             return render_robustness(info, tables, None, missing_figure_note(info))

@@ -68,9 +68,17 @@ class Section:
     """One section of the report, for the upstream artifact of stage ``name``."""
 
     name: str = ""  # the upstream stage: its key in the report's upstream versions
-    # The "Paper tables" sentence of a section that reports one of the paper's tables:
-    # (when the artifact exists, when it does not). None: the section reports none.
-    paper_table: tuple[str, str] | None = None
+    # The paper's table that the section reports (for the "Paper tables" sentence), and the
+    # README heading it is under. None: the section reports none.
+    paper_table: str | None = None
+    heading: str = ""
+    not_run: str = ""  # what the README says under the heading when there is no artifact
+
+    def paper_table_sentence(self, info: ArtifactInfo | None) -> str:
+        """Where the README shows the paper's table, or the command that makes it."""
+        if info is not None:
+            return f'{self.paper_table} is reported above, in "{self.heading}". '
+        return f"{self.paper_table} will appear above once `make {self.name}` has run. "
 
     def resolve(self, ctx: Context) -> ArtifactInfo | None:
         raise NotImplementedError
@@ -87,6 +95,15 @@ class Section:
     def markdown(
         self, info: ArtifactInfo | None, tables: dict[str, Table], figures: dict[str, str]
     ) -> list[str]:
+        """README lines of the section: its heading, then ``body``, or ``not_run`` when the
+        stage's artifact does not exist."""
+        head = [f"## {self.heading}", ""]
+        return head + ([self.not_run, ""] if info is None else self.body(info, tables, figures))
+
+    def body(
+        self, info: ArtifactInfo, tables: dict[str, Table], figures: dict[str, str]
+    ) -> list[str]:
+        """README lines under the heading, for an existing artifact."""
         raise NotImplementedError
 
     def metrics(self, info: ArtifactInfo | None) -> dict[str, Any]:

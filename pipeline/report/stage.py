@@ -9,7 +9,6 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-import hydra
 from omegaconf import DictConfig
 
 from pipeline.artifacts import compute_version, run_stage, stage_config
@@ -27,7 +26,7 @@ from pipeline.report.section import Context, Section
 from pipeline.report.tables import Table
 from pipeline.report.training import TrainingSection
 from pipeline.report.unseen import UnseenSection
-from pipeline.runtime.cli import CONF_DIR, stage_main
+from pipeline.runtime.cli import stage_command
 from pipeline.tracking import StageLog
 
 STAGE = "report"
@@ -168,6 +167,4 @@ def report(cfg: DictConfig) -> Path:
     return out
 
 
-@hydra.main(config_path=CONF_DIR, config_name="report", version_base="1.3")
-def main(cfg: DictConfig) -> None:
-    stage_main(report)(cfg)
+main = stage_command("report", report)

@@ -169,6 +169,14 @@ def text_column(header: str, key: str) -> Column:
     return Column(header, lambda r: None if r.get(key) is None else str(r[key]), text=True)
 
 
+def spread_column(header: str, key: str, csv_keys: tuple[str, ...]) -> Column:
+    """The row's ``key`` in one Markdown column; in the CSV, the row's ``csv_keys`` (each in a
+    column of its own, named by the key, empty where missing) in its place."""
+    return Column(
+        header, lambda r: r[key], csv=tuple((k, lambda r, k=k: r.get(k), "") for k in csv_keys)
+    )
+
+
 def count_column(header: str, key: str) -> Column:
     """The row's ``key`` as an integer (— where missing)."""
     return Column(header, lambda r: integer(r.get(key)))
@@ -266,6 +274,18 @@ def reason_column() -> Column:
     """Why a row made no attempt (``no_attempt_reason``: its trial ends and, for "no grasp",
     the candidates and what rejected them); empty for a row with attempts, — where unknown."""
     return text_column("no attempt: why", "no_attempt_reason")
+
+
+def trial_columns(pph_header: str = "PPH (motion only)") -> list[Column]:
+    """The columns of a closed-loop row: boxes picked and success with their intervals, PPH,
+    the failures by kind, how the trials ended and why a row made no attempt."""
+    return [
+        *book_columns(),
+        pph_column(pph_header),
+        *failure_columns(),
+        *end_columns(),
+        reason_column(),
+    ]
 
 
 def drops_table(name: str, rows: list[dict]) -> Table:

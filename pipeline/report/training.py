@@ -159,22 +159,14 @@ def training_curve_table(trained: TrainInfo) -> Table | None:
     rows = [
         [e, tl, vl, "model" if e == best else ""] for e, (tl, vl) in enumerate(zip(train, val), 1)
     ]
-    return Table(
-        "training_curve",
-        ["epoch", "train loss", "val loss", ""],
-        rows,
-        ["{}", "{:.4f}", "{:.4f}", ""],
-        csv_formats=["{}", "{:.6f}", "{:.6f}", ""],
-    )
+    headers, formats = ["epoch", "train loss", "val loss", ""], ["{}", "{:.4f}", "{:.4f}", ""]
+    csv_formats = ["{}", "{:.6f}", "{:.6f}", ""]
+    return Table("training_curve", headers, rows, formats, csv_formats=csv_formats)
 
 
-def render_train(
-    trained: TrainInfo | None, tables: dict[str, Table], figure: str | None
-) -> list[str]:
+def render_train(trained: TrainInfo, tables: dict[str, Table], figure: str | None) -> list[str]:
     """README lines of the Table 1 section (``figure``: the PR-curve figure, if drawn)."""
-    out = [f"## {TABLE1_SECTION}", ""]
-    if trained is None:
-        return out + [TRAIN_NOT_RUN, ""]
+    out: list[str] = []
     m = trained.metrics
     t1 = m["table1"]
     net = m["network"]
@@ -266,12 +258,9 @@ def render_train(
 
 class TrainingSection(Section):
     name = "train"
-    paper_table = (
-        "Table 1 of the paper (precision of the DCNN model's predictions) is reported above, "
-        f'in "{TABLE1_SECTION}". ',
-        "Table 1 of the paper (precision of the DCNN model's predictions) will appear above "
-        "once the training stage has run (`make train`). ",
-    )
+    not_run = TRAIN_NOT_RUN
+    paper_table = "Table 1 of the paper (precision of the DCNN model's predictions)"
+    heading = TABLE1_SECTION
 
     def resolve(self, ctx: Context) -> TrainInfo | None:
         return resolve_train(ctx.models, ctx.requested("train"), ctx.version("label"))
@@ -292,7 +281,5 @@ class TrainingSection(Section):
             )
         }
 
-    def markdown(
-        self, info: TrainInfo | None, tables: dict[str, Table], figures: dict[str, str]
-    ) -> list[str]:
+    def body(self, info: TrainInfo, tables: dict[str, Table], figures: dict[str, str]) -> list[str]:
         return render_train(info, tables, PR_FIGURE if PR_FIGURE in figures else None)

@@ -13,24 +13,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from pipeline.artifacts import ArtifactError
+from pipeline.report import tables as fmt
 from pipeline.report.section import Context, Section
-from pipeline.report.tables import (
-    Table,
-    book_columns,
-    drops_table,
-    end_columns,
-    failure_columns,
-    integer,
-    number,
-    pph_column,
-    reason_column,
-    table_of,
-    text_column,
-    times,
-    within_key,
-)
-from pipeline.report.upstream import ArtifactInfo, resolve_upstream
+from pipeline.report.tables import Table, drops_table, table_of, text_column, trial_columns
+from pipeline.report.upstream import ArtifactInfo, lacks_metrics, resolve_upstream
 
 UNSEEN_SECTION = (
     "Unseen box sizes: Tables 1 and 2 and the closed loop on boxes not seen in training"
@@ -48,11 +34,7 @@ class UnseenInfo(ArtifactInfo):
         """Raises ``ArtifactError`` when the manifest lacks the tables or the boxes."""
         metrics = manifest.get("metrics") or {}
         if not all(isinstance(metrics.get(k), list) for k in METRIC_LISTS):
-            raise ArtifactError(
-                f"{folder.name}/manifest.json (unseen) lacks metrics.table1 / "
-                "table2 / boxes; recompute it with `make unseen` "
-                "(unseen.force=true)."
-            )
+            raise lacks_metrics(folder, "unseen", "metrics.table1 / table2 / boxes")
         return cls(folder, manifest)
 
 
@@ -89,10 +71,10 @@ def unseen_table1(metrics: dict) -> Table:
     rows = [
         [
             r["set"],
-            number(r.get("threshold")),
-            *(times(r.get(k)) for k in keys),
-            integer(r.get("scored_images")),
-            integer(r.get("no_prediction_images")),
+            fmt.number(r.get("threshold")),
+            *(fmt.times(r.get(k)) for k in keys),
+            fmt.integer(r.get("scored_images")),
+            fmt.integer(r.get("no_prediction_images")),
         ]
         for r in metrics["table1"]
     ]
@@ -107,7 +89,7 @@ def unseen_table1(metrics: dict) -> Table:
 
 def unseen_table2(metrics: dict) -> Table:
     """Table 2 of every planner on the seen- and the unseen-size test split (percent)."""
-    key, radius = within_key(metrics["table2"])
+    key, radius = fmt.within_key(metrics["table2"])
     headers = [
         "box sizes",
         "planner",
@@ -120,10 +102,10 @@ def unseen_table2(metrics: dict) -> Table:
         [
             r["set"],
             r.get("name", r["planner"]),
-            times(r.get(key)),
-            integer(r.get("images")),
-            integer(r.get("no_grasp")),
-            number(r.get("median_distance_px")),
+            fmt.times(r.get(key)),
+            fmt.integer(r.get("images")),
+            fmt.integer(r.get("no_grasp")),
+            fmt.number(r.get("median_distance_px")),
         ]
         for r in metrics["table2"]
     ]
@@ -141,22 +123,13 @@ def unseen_closed_loop(metrics: dict) -> Table:
         {**r, "label": PLANNER_LABELS.get(r["planner"], r["planner"])}
         for r in metrics.get("closed_loop") or []
     ]
-    columns = [
-        text_column("planner", "label"),
-        *book_columns(),
-        pph_column(),
-        *failure_columns(),
-        *end_columns(),
-        reason_column(),
-    ]
+    columns = [text_column("planner", "label"), *trial_columns()]
     return table_of("unseen_closed_loop", columns, rows)
 
 
-def render_unseen(info: UnseenInfo | None, tables: dict[str, Table]) -> list[str]:
+def render_unseen(info: UnseenInfo, tables: dict[str, Table]) -> list[str]:
     """README lines of the unseen-sizes section."""
-    out = [f"## {UNSEEN_SECTION}", ""]
-    if info is None:
-        return out + [UNSEEN_NOT_RUN, ""]
+    out: list[str] = []
     sizes = ", ".join(
         f"{b['name']} {' x '.join(f'{1000 * x:g}' for x in b['size'])} mm"
         for b in info.metrics["boxes"]
@@ -198,7 +171,7 @@ def render_unseen(info: UnseenInfo | None, tables: dict[str, Table]) -> list[str
 
 
 class UnseenSection(Section):
-    name = "unseen"
+    name, heading, not_run = "unseen", UNSEEN_SECTION, UNSEEN_NOT_RUN
 
     def resolve(self, ctx: Context) -> UnseenInfo | None:
         return resolve_unseen(ctx.root, ctx.requested("unseen"))
@@ -212,7 +185,7 @@ class UnseenSection(Section):
             ]
         return out
 
-    def markdown(
-        self, info: UnseenInfo | None, tables: dict[str, Table], figures: dict[str, str]
+    def body(
+        self, info: UnseenInfo, tables: dict[str, Table], figures: dict[str, str]
     ) -> list[str]:
         return render_unseen(info, tables)

@@ -49,6 +49,15 @@ class ArtifactInfo:
 Info = TypeVar("Info", bound=ArtifactInfo)
 
 
+def lacks_metrics(folder: Path, stage: str, what: str) -> ArtifactError:
+    """The error for a ``stage`` artifact in ``folder`` whose manifest lacks ``what`` (e.g.
+    ``metrics.table3``): it names the command that recomputes it."""
+    return ArtifactError(
+        f"{folder.name}/manifest.json ({stage}) lacks {what}; "
+        f"recompute it with `make {stage}` ({stage}.force=true)."
+    )
+
+
 @dataclass(frozen=True)
 class Match:
     """The artifact must have been made from the version the report reads of another upstream:

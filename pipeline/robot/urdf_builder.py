@@ -49,32 +49,16 @@ CUP_ROD_RADIUS = 0.005  # the vacuum rod behind the pad
 HAND_TILT_LIMIT = math.pi / 2
 
 # xArm6 (pybullet_data/xarm/xarm6_robot.urdf): (name, parent, child, xyz, rpy, lower, upper,
-# effort). Every axis is the child frame's z.
+# effort). Every axis is the child frame's z. Joints 1, 4 and 6 turn +-_TURN: 2 pi (rad) as that
+# file writes it.
+_TURN = 6.28318530718
 _ARM_JOINTS = [
-    ("joint1", "link_base", "link1", (0, 0, 0.267), (0, 0, 0), -6.28318530718, 6.28318530718, 50.0),
+    ("joint1", "link_base", "link1", (0, 0, 0.267), (0, 0, 0), -_TURN, _TURN, 50.0),
     ("joint2", "link1", "link2", (0, 0, 0), (-1.5708, 0, 0), -2.059, 2.0944, 50.0),
     ("joint3", "link2", "link3", (0.0535, -0.2845, 0), (0, 0, 0), -3.927, 0.19198, 32.0),
-    (
-        "joint4",
-        "link3",
-        "link4",
-        (0.0775, 0.3425, 0),
-        (-1.5708, 0, 0),
-        -6.28318530718,
-        6.28318530718,
-        32.0,
-    ),
+    ("joint4", "link3", "link4", (0.0775, 0.3425, 0), (-1.5708, 0, 0), -_TURN, _TURN, 32.0),
     ("joint5", "link4", "link5", (0, 0, 0), (1.5708, 0, 0), -1.69297, 3.14159265359, 32.0),
-    (
-        "joint6",
-        "link5",
-        "link6",
-        (0.076, 0.097, 0),
-        (-1.5708, 0, 0),
-        -6.28318530718,
-        6.28318530718,
-        20.0,
-    ),
+    ("joint6", "link5", "link6", (0.076, 0.097, 0), (-1.5708, 0, 0), -_TURN, _TURN, 20.0),
 ]
 _ARM_MASSES = {
     "link_base": 2.7,

@@ -80,6 +80,11 @@ def import_with_fix(name: str) -> ModuleType:
         ) from e
 
 
+def conf_file(group: str, name: str) -> Path:
+    """The YAML file of option ``name`` of config group ``group`` (``conf/<group>/<name>.yaml``)."""
+    return Path(CONF_DIR) / group / f"{name}.yaml"
+
+
 def own_overrides(exclude_prefix: str) -> list[str]:
     """This command's own Hydra overrides, minus those of ``<exclude_prefix>.*`` (a study stage
     passes the rest on to every stage it runs); none outside ``@hydra.main``."""
@@ -122,6 +127,24 @@ def stage_main(stage_fn: Callable[[DictConfig], object]) -> Callable[[DictConfig
             sys.exit(2)
 
     return main
+
+
+def stage_command(
+    config_name: str, stage_fn: Callable[..., object], *, study: bool = False
+) -> Callable[[], None]:
+    """The command line of a stage, ``python -m <its module> [overrides]``: Hydra composes
+    ``conf/<config_name>.yaml`` with the command line's overrides and calls ``stage_fn`` on the
+    result, through ``stage_main``. ``study``: ``stage_fn(cfg, overrides)`` also gets the command
+    line's own overrides but its own section's (``own_overrides``), to pass on to every stage it
+    runs."""
+    import hydra
+
+    @functools.wraps(stage_fn)  # Hydra names the job after the stage's module
+    def run(cfg: DictConfig) -> object:
+        return stage_fn(cfg, own_overrides(config_name)) if study else stage_fn(cfg)
+
+    entry = hydra.main(config_path=CONF_DIR, config_name=config_name, version_base="1.3")
+    return entry(stage_main(run))
 
 
 def compose(config_name: str, overrides: list[str]) -> DictConfig:

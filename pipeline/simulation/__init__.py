@@ -1,8 +1,3 @@
 """Physics simulation of box heaps in a bin (pybullet)."""
 
-from pipeline.simulation.heap import (  # noqa: F401
-    BoxPose,
-    HeapResult,
-    drop_heap,
-    settle,
-)
+from pipeline.simulation.heap import BoxPose, HeapResult, drop_heap, settle  # noqa: F401

@@ -7,7 +7,12 @@ from dataclasses import dataclass
 import numpy as np
 import pybullet as p
 
-from pipeline.camera.geometry import Intrinsics, camera_pose_above_bin, pose_matrix
+from pipeline.camera.geometry import (
+    Intrinsics,
+    camera_pose_above_bin,
+    pose_matrix,
+    quat_from_matrix,
+)
 from pipeline.camera.render import render_depth
 from pipeline.camera.sensor import apply_sensor_model
 from pipeline.cell.bin import build_cell
@@ -38,6 +43,16 @@ class SimulatedScene:
     num_removed: int
     settle_steps: int
     settled: bool
+
+
+def instance_mask(body_ids: np.ndarray, objects: list[int]) -> np.ndarray:
+    """The (H, W) uint8 instance mask of a rendered (H, W) body-id image ``body_ids`` (-1 = no
+    body): k where the pixel shows ``objects[k-1]``, 0 for everything else."""
+    lut = np.zeros(int(body_ids.max(initial=-1)) + 2, dtype=np.uint8)
+    for k, body in enumerate(objects, start=1):
+        if body + 1 < len(lut):
+            lut[body + 1] = k
+    return lut[body_ids + 1]
 
 
 def scene_rng(base_seed: int, split_code: int, index: int) -> np.random.Generator:
@@ -71,12 +86,7 @@ def simulate_scene(
         renderer=cfg.camera.renderer,
         bodies=cell[1:] + [b.body_id for b in heap.boxes],
     )
-    # body id -> instance number (1-based; 0 for everything that is not a kept box)
-    lut = np.zeros(int(frame.body_ids.max(initial=-1)) + 2, dtype=np.uint8)
-    for k, box in enumerate(heap.boxes, start=1):
-        if box.body_id + 1 < len(lut):
-            lut[box.body_id + 1] = k
-    mask = lut[frame.body_ids + 1]
+    mask = instance_mask(frame.body_ids, [b.body_id for b in heap.boxes])
     depth = apply_sensor_model(frame.depth_m, cfg.sensor, rng, intr)
     return SimulatedScene(
         depth_m=depth,
@@ -94,6 +104,21 @@ def simulate_scene(
 def box_pose_world(box: BoxPose) -> np.ndarray:
     """(4, 4) pose of the box centre in the world frame."""
     return pose_matrix(box.position, box.quat_xyzw)
+
+
+def collision_box(client: int, size, T_world_box: np.ndarray) -> int:
+    """A static box with a collision shape and no visual one: edges ``size`` (x, y, z) in
+    metres, centred at the pose ``T_world_box`` ((4, 4), world frame). Returns its body id."""
+    half = (np.asarray(size) / 2).tolist()
+    shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client)
+    return p.createMultiBody(
+        0.0,
+        shape,
+        -1,
+        basePosition=T_world_box[:3, 3].tolist(),
+        baseOrientation=quat_from_matrix(T_world_box[:3, :3]).tolist(),
+        physicsClientId=client,
+    )
 
 
 def connect() -> int:

@@ -27,20 +27,13 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import hydra
 from omegaconf import DictConfig
 
-from pipeline.artifacts import compute_version, run_stage, stage_config
+from pipeline.artifacts import stage_config
 from pipeline.artifacts.csvfile import write_rows
 from pipeline.artifacts.store import StageRun
-from pipeline.runtime.cli import (
-    CONF_DIR,
-    compose,
-    data_root,
-    own_overrides,
-    scale_overrides,
-    stage_main,
-)
+from pipeline.runtime.cli import compose, data_root, scale_overrides, stage_command
+from pipeline.runtime.stage_artifacts import run_stage_from_config
 from pipeline.tracking import StageLog
 from pipeline.world.books import RATE_KEYS, finite
 
@@ -115,26 +108,22 @@ def ablation(cfg: DictConfig, overrides: list[str] | None = None) -> Path:
     rows = run_variants(cfg, base)
     upstream = {f"{r['planner']}/{r['variant']}": r["evaluate_version"] for r in rows}
     config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
-    version = compute_version(STAGE, config, upstream)
 
     def body(run: StageRun) -> None:
         write_rows(run.work_dir / "ablation.csv", rows)
         (run.work_dir / "ablation.json").write_text(json.dumps(rows, indent=1) + "\n")
         run.metrics["ablation"] = rows
-        with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version) as log:
+        with StageLog.for_stage(run.work_dir, STAGE, run.version) as log:
             for i, row in enumerate(rows):
                 log.set_time(sequences={"variant": i}, clock_ns=i * 1_000_000_000)
                 if row["success_rate"] is not None:
                     log.log_scalar(f"{row['planner']}/success_rate", float(row["success_rate"]))
                 log.log_text("log", "ablation: " + json.dumps(row))
 
-    seed, force = int(cfg.seed), bool(ab.force)
-    return run_stage(data_root(cfg), STAGE, version, config, upstream, body, seed=seed, force=force)
+    return run_stage_from_config(cfg, STAGE, config, upstream, body)
 
 
-@hydra.main(config_path=CONF_DIR, config_name="ablation", version_base="1.3")
-def main(cfg: DictConfig) -> None:
-    stage_main(lambda c: ablation(c, own_overrides("ablation")))(cfg)
+main = stage_command("ablation", ablation, study=True)
 
 
 if __name__ == "__main__":

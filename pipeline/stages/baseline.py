@@ -39,31 +39,23 @@ Artifact (``data/baseline/<version>/``)::
 from __future__ import annotations
 
 import csv
-import dataclasses
 import json
 import math
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
-import hydra
 import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
 
-from pipeline.artifacts import (
-    check_artifact,
-    compute_version,
-    load_manifest,
-    resolve_artifact,
-    run_stage,
-    stage_config,
-)
+from pipeline.artifacts import check_artifact, load_manifest, resolve_artifact, stage_config
 from pipeline.artifacts.store import ArtifactError, StageRun
 from pipeline.dataset.pixels import pixels_to_points
 from pipeline.dataset.scenes import SPLITS, SceneDataset
 from pipeline.dataset.storage import write_npz
 from pipeline.dexnet.contact import REASONS
-from pipeline.dexnet.gqcnn import count_parameters
 from pipeline.dexnet.labels import (
     CANDIDATE_FIELDS,
     init_worker,
@@ -89,10 +81,12 @@ from pipeline.dexnet.planner import (
     crop_config,
 )
 from pipeline.dexnet.table2 import EVAL_SEED, OOD, OURS, evaluate_table2, table2_rows
-from pipeline.dexnet.training import build_inputs, evaluate_gqcnn, train_gqcnn
+from pipeline.dexnet.trained import save_gqcnn, training_metrics, training_timings
+from pipeline.dexnet.training import build_inputs, train_gqcnn
 from pipeline.planner.centre_distance import PAPER_RADIUS_PX, PAPER_TABLE2
-from pipeline.runtime.cli import CONF_DIR, data_root, stage_main
+from pipeline.runtime.cli import stage_command
 from pipeline.runtime.executor import map_shards, resolve_workers
+from pipeline.runtime.stage_artifacts import run_stage_from_config, upstream_artifact
 from pipeline.tracking import StageLog
 
 STAGE = "baseline"
@@ -239,6 +233,36 @@ def _write_index(run: StageRun, name: str, splits, fields: dict, tasks: list, pa
     (run.work_dir / name).write_text(json.dumps(index, indent=2) + "\n")
 
 
+def _run_shards(
+    done: dict,
+    tasks: list,
+    path_of: Callable[[Any], str],
+    job: tuple,
+    cfg_obj,
+    workers: int,
+    progress: bool,
+) -> tuple[int, float]:
+    """Run the shards of ``tasks`` whose file (``path_of(task)``) is not in ``done`` and put
+    their summaries there, by file. ``job``: the shard function, the workers' initialiser, its
+    arguments and the progress bar's name (``map_shards``, on ``workers`` processes of the
+    ``executor``). Returns the scenes run and the seconds they took."""
+    t0 = time.perf_counter()
+    todo = [t for t in tasks if path_of(t) not in done]
+    fn, init, initargs, desc = job
+    shards = map_shards(
+        fn,
+        todo,
+        init=init,
+        initargs=initargs,
+        workers=workers,
+        desc=desc,
+        progress=progress,
+        executor=cfg_obj.executor,
+    )
+    done.update(zip([path_of(t) for t in todo], shards))
+    return sum(t.count for t in todo), time.perf_counter() - t0
+
+
 def _make_ood_data(
     run: StageRun, cfg_obj, gen_dir: Path, tasks: list, done: dict, workers: int, progress: bool
 ) -> None:
@@ -249,29 +273,10 @@ def _make_ood_data(
     meta = SceneDataset(gen_dir, "test")
     sensor = SimpleNamespace(**meta.sensor)  # the box heaps' sensor (camera.json)
     _write_index(run, "ood.json", ("train", "val"), OOD_FIELDS, tasks, lambda t: t.path)
-    t0 = time.perf_counter()
-    todo = [t for t in tasks if t.path not in done]
-    done.update(
-        zip(
-            [t.path for t in todo],
-            map_shards(
-                ood_shard,
-                todo,
-                init=init_ood_worker,
-                initargs=(cfg_obj, sensor, meta.depth_unit),
-                workers=workers,
-                desc=f"{STAGE} object heaps",
-                progress=progress,
-                executor=cfg_obj.executor,
-            ),
-        )
-    )
-    seconds = time.perf_counter() - t0
+    job = (ood_shard, init_ood_worker, (cfg_obj, sensor, meta.depth_unit), f"{STAGE} object heaps")
+    scenes, seconds = _run_shards(done, tasks, lambda t: t.path, job, cfg_obj, workers, progress)
     run.timings.update(
-        {
-            "ood_s": round(seconds, 3),
-            "ood_scenes_per_s": round(sum(t.count for t in todo) / max(seconds, 1e-9), 3),
-        }
+        {"ood_s": round(seconds, 3), "ood_scenes_per_s": round(scenes / max(seconds, 1e-9), 3)}
     )
     out = {}
     for split in ("train", "val"):
@@ -303,27 +308,9 @@ def _train_ood(run: StageRun, cfg, tasks: list, box_test: tuple, progress: bool)
             "objects.min_count (conf/objects/)"
         )
     net, history = train_gqcnn(cfg, inputs["train"], inputs["val"], progress, name=OOD)
-    torch.save(
-        {
-            "network": dataclasses.asdict(net.cfg),
-            "crop": dataclasses.asdict(crop),
-            "state_dict": net.state_dict(),
-        },
-        run.work_dir / OOD_MODEL_FILE,
-    )
-    run.timings.update(
-        {
-            "gqcnn_ood_train_s": round(history["train_s"], 3),
-            "gqcnn_ood_samples_per_s": round(history["samples_per_s"], 1),
-        }
-    )
-    run.metrics[OOD] = {
-        "parameters": count_parameters(net),
-        "train_samples": int(len(inputs["train"][2])),
-        "train_loss": [round(x, 6) for x in history["train_loss"]],
-        "val": [{k: round(v, 6) for k, v in e.items()} for e in history["val"]],
-        "box_test": {k: round(v, 6) for k, v in evaluate_gqcnn(net, *box_test).items()},
-    }
+    save_gqcnn(net, crop, run.work_dir / OOD_MODEL_FILE)
+    run.timings.update(training_timings(OOD, history))
+    run.metrics[OOD] = training_metrics(net, history, inputs["train"], {"box_test": box_test})
 
 
 def _train_artifact(cfg) -> Path | None:
@@ -356,13 +343,7 @@ def baseline(cfg: DictConfig) -> Path:
     with_ood = OOD in cfg.baseline.variants
     if with_ood:
         check_ood_config(cfg)
-    gen_dir = resolve_artifact(
-        data_root(cfg),
-        STAGE_UPSTREAM,
-        cfg.baseline.generate_version,
-        verify=True,
-        key="baseline.generate_version",
-    )
+    gen_dir = upstream_artifact(cfg, STAGE_UPSTREAM, "baseline.generate_version")
     train_dir = _train_artifact(cfg)
     upstream = {"generate": gen_dir.name}
     if train_dir is not None:
@@ -374,7 +355,6 @@ def baseline(cfg: DictConfig) -> Path:
     sections = SECTIONS + (("objects",) if with_ood else ())
     ignore = NOT_AFFECTING_RESULT + (() if with_ood else ("baseline.ood",))
     config = stage_config(cfg, sections, ignore)
-    version = compute_version(STAGE, config, upstream=upstream)
     cfg_obj = OmegaConf.to_object(cfg)
     workers = resolve_workers(cfg_obj.baseline.workers, cfg_obj.executor)
     progress = bool(cfg_obj.logging.progress)
@@ -386,7 +366,7 @@ def baseline(cfg: DictConfig) -> Path:
             _make_ood_data(run, cfg_obj, gen_dir, ood_tasks, done, workers, progress)
         history = _train_box_gqcnn(run, cfg, gen_dir, ood_tasks if with_ood else None, progress)
         result = _table2(run, cfg, gen_dir, train_dir, progress)
-        with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version) as log:
+        with StageLog.for_stage(run.work_dir, STAGE, run.version) as log:
             steps = math.ceil(len(history["step_loss"]) / max(int(cfg.baseline.epochs), 1))
             _log_history(log, history, steps)
             _log_candidates(log, gen_dir, run.work_dir, int(cfg.baseline.log_samples))
@@ -394,18 +374,7 @@ def baseline(cfg: DictConfig) -> Path:
                 log, cfg, gen_dir, run.work_dir, result, int(cfg.baseline.log_samples)
             )
 
-    seed, force = cfg_obj.seed, cfg_obj.baseline.force
-    return run_stage(
-        data_root(cfg),
-        STAGE,
-        version,
-        config,
-        upstream,
-        body,
-        seed=seed,
-        force=force,
-        resumable=True,
-    )
+    return run_stage_from_config(cfg, STAGE, config, upstream, body, resumable=True)
 
 
 def _label_candidates(
@@ -426,31 +395,16 @@ def _label_candidates(
     if run.resumed:
         run.timings["shards_resumed"] = len(done)
     _write_index(run, "candidates.json", SPLITS, CANDIDATE_FIELDS, tasks, lambda t: t.out_path)
-    t0 = time.perf_counter()
-    todo = [t for t in tasks if t.out_path not in done]
-    done.update(
-        zip(
-            [t.out_path for t in todo],
-            map_shards(
-                label_shard,
-                todo,
-                init=init_worker,
-                initargs=(cfg_obj, str(gen_dir)),
-                workers=workers,
-                desc=f"{STAGE} labels",
-                progress=progress,
-                executor=cfg_obj.executor,
-            ),
-        )
+    job = (label_shard, init_worker, (cfg_obj, str(gen_dir)), f"{STAGE} labels")
+    scenes, seconds = _run_shards(
+        done, tasks, lambda t: t.out_path, job, cfg_obj, workers, progress
     )
     summaries = [done[t.out_path] for t in tasks]
-    label_s = time.perf_counter() - t0
-    n_scenes = sum(t.count for t in todo)
     run.timings.update(
         {
-            "label_s": round(label_s, 3),
+            "label_s": round(seconds, 3),
             "label_workers": workers,
-            "label_scenes_per_s": round(n_scenes / max(label_s, 1e-9), 3),
+            "label_scenes_per_s": round(scenes / max(seconds, 1e-9), 3),
         }
     )
     labels_metrics = {}
@@ -484,27 +438,9 @@ def _train_box_gqcnn(
             "boxes to sample on (check generate.num_scenes and boxes.max_count)"
         )
     net, history = train_gqcnn(cfg, inputs["train"], inputs["val"], progress)
-    torch.save(
-        {
-            "network": dataclasses.asdict(net.cfg),
-            "crop": dataclasses.asdict(crop),
-            "state_dict": net.state_dict(),
-        },
-        run.work_dir / MODEL_FILE,
-    )
-    run.timings.update(
-        {
-            "gqcnn_train_s": round(history["train_s"], 3),
-            "gqcnn_samples_per_s": round(history["samples_per_s"], 1),
-        }
-    )
-    run.metrics["gqcnn"] = {
-        "parameters": count_parameters(net),
-        "train_samples": int(len(inputs["train"][2])),
-        "train_loss": [round(x, 6) for x in history["train_loss"]],
-        "val": [{k: round(v, 6) for k, v in e.items()} for e in history["val"]],
-        "test": {k: round(v, 6) for k, v in evaluate_gqcnn(net, *inputs["test"]).items()},
-    }
+    save_gqcnn(net, crop, run.work_dir / MODEL_FILE)
+    run.timings.update(training_timings("gqcnn", history))
+    run.metrics["gqcnn"] = training_metrics(net, history, inputs["train"], {"test": inputs["test"]})
     if ood_tasks is not None:
         _train_ood(run, cfg, ood_tasks, inputs["test"], progress)
     return history
@@ -551,9 +487,7 @@ def _table2(
 STAGE_UPSTREAM = "generate"
 
 
-@hydra.main(config_path=CONF_DIR, config_name="baseline", version_base="1.3")
-def main(cfg: DictConfig) -> None:
-    stage_main(baseline)(cfg)
+main = stage_command("baseline", baseline)
 
 
 if __name__ == "__main__":

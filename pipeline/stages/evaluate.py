@@ -50,11 +50,10 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-import hydra
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
-from pipeline.artifacts import compute_version, resolve_artifact, run_stage, stage_config
+from pipeline.artifacts import stage_config
 from pipeline.artifacts.csvfile import write_rows
 from pipeline.artifacts.store import StageRun
 from pipeline.camera.render import check_renderer
@@ -62,8 +61,9 @@ from pipeline.controller.check import COLLISION_MODELS
 from pipeline.controller.planning import BUILT_IN, load_plugin, plugin_target
 from pipeline.controller.retry import RETRY_POLICIES
 from pipeline.robot.approach import check_approach
-from pipeline.runtime.cli import CONF_DIR, data_root, stage_main
+from pipeline.runtime.cli import stage_command
 from pipeline.runtime.executor import map_shards, resolve_workers
+from pipeline.runtime.stage_artifacts import run_stage_from_config, upstream_artifact
 from pipeline.tracking import StageLog
 from pipeline.world.books import convergence_rows, drops_by_mass, summarise
 from pipeline.world.trial import HEAP_STREAMS, OUTCOMES, TrialResult, TrialRunner, make_runner
@@ -400,12 +400,8 @@ def _planner_artifacts(cfg: DictConfig, planners: list[str]) -> tuple[Path | Non
 
     train_dir = baseline_dir = None
     if "dcnn" in planners:
-        train_dir = resolve_artifact(
-            Path(cfg.paths.models),
-            "train",
-            cfg.evaluate.train_version,
-            verify=True,
-            key="evaluate.train_version",
+        train_dir = upstream_artifact(
+            cfg, "train", "evaluate.train_version", root=Path(cfg.paths.models)
         )
     if "dexnet" in planners and str(cfg.evaluate.dexnet_variant) not in BASELINE_VARIANTS:
         raise ValueError(
@@ -418,13 +414,7 @@ def _planner_artifacts(cfg: DictConfig, planners: list[str]) -> tuple[Path | Non
         if model_file is None:  # training-free (planarity)
             continue
         if baseline_dir is None:
-            baseline_dir = resolve_artifact(
-                data_root(cfg),
-                "baseline",
-                cfg.evaluate.baseline_version,
-                verify=True,
-                key="evaluate.baseline_version",
-            )
+            baseline_dir = upstream_artifact(cfg, "baseline", "evaluate.baseline_version")
         if not (baseline_dir / model_file).is_file():
             raise ValueError(
                 f"baseline artifact {baseline_dir.name} has no {model_file} (its "
@@ -448,7 +438,6 @@ def evaluate(cfg: DictConfig) -> Path:
     for name, digest in plugins.items():  # a plug-in's source is part of the version
         upstream[f"plugin:{name}"] = digest
     config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
-    version = compute_version(STAGE, config, upstream)
     cfg_obj = OmegaConf.to_object(cfg)
     workers = resolve_workers(cfg_obj.evaluate.workers, cfg_obj.executor)
 
@@ -482,11 +471,10 @@ def evaluate(cfg: DictConfig) -> Path:
         run.timings.update(timings)
         from pipeline.camera.geometry import Intrinsics
 
-        with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version) as log:
+        with StageLog.for_stage(run.work_dir, STAGE, run.version) as log:
             log_trials(log, results, Intrinsics.from_config(cfg.camera))
 
-    seed, force = cfg_obj.seed, cfg_obj.evaluate.force
-    return run_stage(data_root(cfg), STAGE, version, config, upstream, body, seed=seed, force=force)
+    return run_stage_from_config(cfg, STAGE, config, upstream, body)
 
 
 def _write_results(run: StageRun, cfg: DictConfig, results: list) -> None:
@@ -543,9 +531,7 @@ def _planner_timings(mine: list) -> dict:
     }
 
 
-@hydra.main(config_path=CONF_DIR, config_name="evaluate", version_base="1.3")
-def main(cfg: DictConfig) -> None:
-    stage_main(evaluate)(cfg)
+main = stage_command("evaluate", evaluate)
 
 
 if __name__ == "__main__":

@@ -24,11 +24,10 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-import hydra
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
-from pipeline.artifacts import compute_version, run_stage, stage_config
+from pipeline.artifacts import stage_config
 from pipeline.artifacts.store import StageRun
 from pipeline.camera.geometry import (
     Intrinsics,
@@ -41,8 +40,9 @@ from pipeline.camera.render import check_renderer
 from pipeline.camera.sensor import apply_sensor_model
 from pipeline.dataset.scenes import SPLIT_CODES, SPLITS, SceneDataset
 from pipeline.dataset.storage import read_npz, shard_index, write_npz
-from pipeline.runtime.cli import CONF_DIR, data_root, stage_main
+from pipeline.runtime.cli import stage_command
 from pipeline.runtime.executor import log_quota, map_shards, resolve_workers
+from pipeline.runtime.stage_artifacts import run_stage_from_config
 from pipeline.simulation.cartons import check_cartons
 from pipeline.simulation.scene import connect, scene_rng, simulate_scene
 from pipeline.tracking import StageLog, default_blueprint
@@ -260,12 +260,13 @@ def _log_static(log: StageLog, cfg_obj) -> None:
         [lx, t, h + ft],
         [lx, t, h + ft],
     ]
-    log.log_static_boxes(
+    log.log_boxes(
         "world/bin",
         np.asarray(centers, float),
         np.asarray(sizes, float),
         np.tile([0.0, 0.0, 0.0, 1.0], (5, 1)),
         labels=["floor"] + ["wall"] * 4,
+        static=True,
     )
 
 
@@ -353,7 +354,6 @@ def check_splits(key: str, names) -> None:
 def generate(cfg: DictConfig) -> Path:
     """Run the generation stage; returns the artifact folder (reused if it already exists)."""
     config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
-    version = compute_version(STAGE, config, upstream={})
     cfg_obj = OmegaConf.to_object(cfg)  # plain dataclasses: fast, picklable for the workers
     sizes = split_sizes(cfg_obj.generate)
     if not cfg_obj.boxes.types:
@@ -391,12 +391,7 @@ def generate(cfg: DictConfig) -> Path:
 
         t1 = time.perf_counter()
         quota = log_quota(sizes, cfg_obj.logging.max_logged_scenes)
-        with StageLog(
-            run.work_dir,
-            app_id=f"binpick-{STAGE}",
-            recording_id=run.version,
-            blueprint=default_blueprint(),
-        ) as log:
+        with StageLog.for_stage(run.work_dir, STAGE, run.version, default_blueprint()) as log:
             _log_static(log, cfg_obj)
             log_index = 0
             for split in SPLITS:
@@ -408,10 +403,7 @@ def generate(cfg: DictConfig) -> Path:
         run.metrics.update(_metrics(summaries, sizes, cfg_obj.boxes.max_count))
         run.metrics["logged_scenes"] = log_index
 
-    seed, force = cfg_obj.seed, cfg_obj.generate.force
-    return run_stage(
-        data_root(cfg), STAGE, version, config, {}, body, seed=seed, force=force, resumable=True
-    )
+    return run_stage_from_config(cfg, STAGE, config, {}, body, resumable=True)
 
 
 def _write_meta(run: StageRun, cfg: DictConfig, cfg_obj, tasks: list[ShardTask]) -> None:
@@ -444,9 +436,7 @@ def _write_meta(run: StageRun, cfg: DictConfig, cfg_obj, tasks: list[ShardTask])
     (run.work_dir / "index.json").write_text(json.dumps(index, indent=2) + "\n")
 
 
-@hydra.main(config_path=CONF_DIR, config_name="generate", version_base="1.3")
-def main(cfg: DictConfig) -> None:
-    stage_main(generate)(cfg)
+main = stage_command("generate", generate)
 
 
 if __name__ == "__main__":

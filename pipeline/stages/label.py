@@ -42,17 +42,10 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import hydra
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
-from pipeline.artifacts import (
-    artifact_file,
-    compute_version,
-    resolve_artifact,
-    run_stage,
-    stage_config,
-)
+from pipeline.artifacts import artifact_file, stage_config
 from pipeline.artifacts.store import StageRun
 from pipeline.camera.geometry import quat_from_axes
 from pipeline.dataset.labels import LABEL_FIELDS, LabelSet
@@ -61,8 +54,9 @@ from pipeline.dataset.storage import read_npz, shard_index, write_npz
 from pipeline.grasping.types import CLASS_COLORS, NG_REASONS, GraspClass
 from pipeline.labelling.scene import label_scene
 from pipeline.labelling.surface_truth import aggregate
-from pipeline.runtime.cli import CONF_DIR, data_root, stage_main
+from pipeline.runtime.cli import stage_command
 from pipeline.runtime.executor import log_quota, map_shards, resolve_workers
+from pipeline.runtime.stage_artifacts import run_stage_from_config, upstream_artifact
 from pipeline.tracking import StageLog, default_blueprint
 
 STAGE = "label"
@@ -323,15 +317,9 @@ def _log_scene(
 def label(cfg: DictConfig) -> Path:
     """Run the labelling stage on a generation artifact; returns the label artifact folder."""
     check_hold_mass(cfg)
-    gen_dir = resolve_artifact(
-        data_root(cfg),
-        "generate",
-        cfg.label.generate_version,
-        verify=True,
-        key="label.generate_version",
-    )
+    gen_dir = upstream_artifact(cfg, "generate", "label.generate_version")
+    upstream = {"generate": gen_dir.name}
     config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
-    version = compute_version(STAGE, config, upstream={"generate": gen_dir.name})
     cfg_obj = OmegaConf.to_object(cfg)
     workers = resolve_workers(cfg_obj.label.workers, cfg_obj.executor)
 
@@ -374,18 +362,7 @@ def label(cfg: DictConfig) -> Path:
         sizes = {split: metrics["splits"][split]["scenes"] for split in SPLITS}
         run.metrics["logged_scenes"] = _log_scenes(run, cfg_obj, gen_dir, sizes)
 
-    seed, force = cfg_obj.seed, cfg_obj.label.force
-    return run_stage(
-        data_root(cfg),
-        STAGE,
-        version,
-        config,
-        {"generate": gen_dir.name},
-        body,
-        seed=seed,
-        force=force,
-        resumable=True,
-    )
+    return run_stage_from_config(cfg, STAGE, config, upstream, body, resumable=True)
 
 
 def _write_index(run: StageRun, tasks: list[LabelTask]) -> None:
@@ -432,12 +409,7 @@ def _log_scenes(run: StageRun, cfg_obj, gen_dir: Path, sizes: dict[str, int]) ->
         from pipeline.labelling.robot_check import RobotChecker
 
         checker = RobotChecker(cfg_obj)
-    with StageLog(
-        run.work_dir,
-        app_id=f"binpick-{STAGE}",
-        recording_id=run.version,
-        blueprint=default_blueprint(),
-    ) as log:
+    with StageLog.for_stage(run.work_dir, STAGE, run.version, default_blueprint()) as log:
         log_index = 0
         for split in SPLITS:
             ds, labels = SceneDataset(gen_dir, split), LabelSet(run.work_dir, split)
@@ -448,9 +420,7 @@ def _log_scenes(run: StageRun, cfg_obj, gen_dir: Path, sizes: dict[str, int]) ->
     return log_index
 
 
-@hydra.main(config_path=CONF_DIR, config_name="label", version_base="1.3")
-def main(cfg: DictConfig) -> None:
-    stage_main(label)(cfg)
+main = stage_command("label", label)
 
 
 if __name__ == "__main__":

@@ -50,30 +50,23 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import hydra
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
-from pipeline.artifacts import (
-    compute_version,
-    load_manifest,
-    resolve_artifact,
-    run_stage,
-    stage_config,
-)
+from pipeline.artifacts import load_manifest, resolve_artifact, stage_config
 from pipeline.artifacts.csvfile import write_rows
 from pipeline.artifacts.jsonfile import json_safe, write_json
 from pipeline.artifacts.stages import compared_pair
 from pipeline.artifacts.store import StageRun
 from pipeline.runtime.cli import (
-    CONF_DIR,
     compose,
+    conf_file,
     data_root,
-    own_overrides,
     run_named_stage,
     scale_overrides,
-    stage_main,
+    stage_command,
 )
+from pipeline.runtime.stage_artifacts import run_stage_from_config
 from pipeline.tracking import StageLog
 from pipeline.world.books import RATE_KEYS, finite
 
@@ -168,7 +161,7 @@ class Pipelines:
 # ------------------------------------------------------------------------------ Tables 1 and 2
 def _filter_cfg(name: str):
     """The ``conf/depth_filter/<name>.yaml`` config."""
-    path = Path(CONF_DIR) / "depth_filter" / f"{name}.yaml"
+    path = conf_file("depth_filter", name)
     if not path.is_file():
         choices = sorted(p.stem for p in path.parent.glob("*.yaml"))
         raise ValueError(
@@ -404,7 +397,6 @@ def robustness(cfg: DictConfig, overrides: list[str] | None = None) -> Path:
         if "+" in n
     }
     config["robustness"]["depth_filters"] = filters
-    version = compute_version(STAGE, config, upstream)
 
     def body(run: StageRun) -> None:
         t1 = table1_rows(p, t1_inputs, radius, int(rc.max_images), progress)
@@ -425,16 +417,13 @@ def robustness(cfg: DictConfig, overrides: list[str] | None = None) -> Path:
         tables = json_safe(tables)
         write_json(run.work_dir / "robustness.json", tables)
         run.metrics.update({k: tables[k] for k in ("table1", "table2", "closed_loop")})
-        with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version) as log:
+        with StageLog.for_stage(run.work_dir, STAGE, run.version) as log:
             _log(log, p, picks, int(rc.log_images), tables)
 
-    seed, force = int(cfg.seed), bool(rc.force)
-    return run_stage(data_root(cfg), STAGE, version, config, upstream, body, seed=seed, force=force)
+    return run_stage_from_config(cfg, STAGE, config, upstream, body)
 
 
-@hydra.main(config_path=CONF_DIR, config_name="robustness", version_base="1.3")
-def main(cfg: DictConfig) -> None:
-    stage_main(lambda c: robustness(c, own_overrides("robustness")))(cfg)
+main = stage_command("robustness", robustness, study=True)
 
 
 if __name__ == "__main__":

@@ -58,7 +58,6 @@ import math
 import time
 from pathlib import Path
 
-import hydra
 import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
@@ -96,7 +95,8 @@ from pipeline.planner.normalisation import normalisation
 from pipeline.planner.planner import MODEL_FILE, Planner, pick_device, ranking_config
 from pipeline.planner.schedule import schedule_config
 from pipeline.planner.scoring import ranked_images, table1
-from pipeline.runtime.cli import CONF_DIR, data_root, stage_main
+from pipeline.runtime.cli import data_root, stage_command
+from pipeline.runtime.stage_artifacts import upstream_artifact
 from pipeline.tracking import StageLog
 
 STAGE = "train"
@@ -169,9 +169,7 @@ def _log_samples(
 
 def _inputs(cfg: DictConfig) -> tuple[Path, Path]:
     """(label artifact, the generation artifact it was made from), both verified."""
-    label_dir = resolve_artifact(
-        data_root(cfg), "label", cfg.train.label_version, verify=True, key="train.label_version"
-    )
+    label_dir = upstream_artifact(cfg, "label", "train.label_version")
     gen_version = (load_manifest(label_dir).get("upstream") or {}).get("generate")
     try:
         gen_dir = resolve_artifact(data_root(cfg), "generate", str(gen_version), verify=True)
@@ -390,7 +388,7 @@ class _TrainingRun:
                 "train_images_per_s": round(images_done / train_s, 3) if train_s else None,
             }
         )
-        with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version) as log:
+        with StageLog.for_stage(run.work_dir, STAGE, run.version) as log:
             _log_history(log, history, math.ceil(len(sets["train"]) / trainer.batch))
             end_ns = (len(history["step_total"]) + 1) * 1_000_000
             log.set_time(sequences={"epoch": len(history["train_loss"])}, clock_ns=end_ns)
@@ -533,9 +531,7 @@ def _metrics(
     }
 
 
-@hydra.main(config_path=CONF_DIR, config_name="train", version_base="1.3")
-def main(cfg: DictConfig) -> None:
-    stage_main(train)(cfg)
+main = stage_command("train", train)
 
 
 if __name__ == "__main__":

@@ -50,25 +50,24 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import hydra
 import numpy as np
 from omegaconf import DictConfig
 
-from pipeline.artifacts import compute_version, load_manifest, run_stage, stage_config
+from pipeline.artifacts import load_manifest, stage_config
 from pipeline.artifacts.csvfile import write_rows
 from pipeline.artifacts.jsonfile import json_safe, write_json
 from pipeline.artifacts.pointers import keep_latest
 from pipeline.artifacts.stages import compared_pair
 from pipeline.artifacts.store import StageRun
 from pipeline.runtime.cli import (
-    CONF_DIR,
     compose,
+    conf_file,
     data_root,
-    own_overrides,
     run_named_stage,
     scale_overrides,
-    stage_main,
+    stage_command,
 )
+from pipeline.runtime.stage_artifacts import run_stage_from_config
 from pipeline.tracking import StageLog
 
 STAGE = "unseen"
@@ -95,7 +94,7 @@ def build(base: list[str], uc, data: Path, models: Path) -> dict[str, Path]:
             f"unseen.test_scenes={uc.test_scenes}: the unseen-size test split "
             "needs at least one heap"
         )
-    boxes_file = Path(CONF_DIR) / "boxes" / f"{uc.boxes}.yaml"
+    boxes_file = conf_file("boxes", uc.boxes)
     if not boxes_file.is_file():
         choices = sorted(p.stem for p in boxes_file.parent.glob("*.yaml"))
         raise ValueError(
@@ -106,7 +105,7 @@ def build(base: list[str], uc, data: Path, models: Path) -> dict[str, Path]:
             f"unseen.closed_loop_trials={uc.closed_loop_trials}: give a number of "
             "trials, or 0 for no closed loop"
         )
-    loop_file = Path(CONF_DIR) / "eval_boxes" / f"{uc.closed_loop_boxes}.yaml"
+    loop_file = conf_file("eval_boxes", uc.closed_loop_boxes)
     if int(uc.closed_loop_trials) > 0 and not loop_file.is_file():
         choices = sorted(p.stem for p in loop_file.parent.glob("*.yaml"))
         raise ValueError(
@@ -239,7 +238,6 @@ def unseen(cfg: DictConfig, overrides: list[str] | None = None) -> Path:
     dirs = build(base, uc, data_root(cfg), Path(cfg.paths.models))
     upstream = {k: v.name for k, v in sorted(dirs.items())}
     config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
-    version = compute_version(STAGE, config, upstream)
 
     def body(run: StageRun) -> None:
         t1, t2, picks = unseen_tables(cfg, dirs, bool(cfg.logging.progress))
@@ -266,16 +264,13 @@ def unseen(cfg: DictConfig, overrides: list[str] | None = None) -> Path:
         run.metrics.update(
             {k: tables[k] for k in ("table1", "table2", "boxes", "closed_loop", "drops_by_mass")}
         )
-        with StageLog(run.work_dir, app_id=f"binpick-{STAGE}", recording_id=run.version) as log:
+        with StageLog.for_stage(run.work_dir, STAGE, run.version) as log:
             _log(log, dirs["generate_unseen"], picks, int(uc.log_images), tables)
 
-    seed, force = int(cfg.seed), bool(uc.force)
-    return run_stage(data_root(cfg), STAGE, version, config, upstream, body, seed=seed, force=force)
+    return run_stage_from_config(cfg, STAGE, config, upstream, body)
 
 
-@hydra.main(config_path=CONF_DIR, config_name="unseen", version_base="1.3")
-def main(cfg: DictConfig) -> None:
-    stage_main(lambda c: unseen(c, own_overrides("unseen")))(cfg)
+main = stage_command("unseen", unseen, study=True)
 
 
 if __name__ == "__main__":

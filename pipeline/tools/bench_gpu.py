@@ -173,13 +173,8 @@ def agreement(cfg, width: float, steps: int) -> dict[str, float]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--widths",
-        type=float,
-        nargs="+",
-        default=None,
-        help="network widths (default: the `default` experiment's and 1.0)",
-    )
+    widths_help = "network widths (default: the `default` experiment's and 1.0)"
+    parser.add_argument("--widths", type=float, nargs="+", help=widths_help)
     parser.add_argument("--steps", type=int, default=20, help="timed training steps per figure")
     args = parser.parse_args(argv)
     if not torch.cuda.is_available():

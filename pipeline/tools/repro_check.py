@@ -22,7 +22,7 @@ import tempfile
 from pathlib import Path
 
 from pipeline.artifacts.fingerprint import stage_module
-from pipeline.artifacts.store import load_manifest, resolve_artifact
+from pipeline.artifacts.store import available_versions, load_manifest, resolve_artifact
 from pipeline.runtime.cli import REPRODUCE_STAGES
 from pipeline.tools.view import MODEL_STAGES
 from pipeline.tracking import rrd_equal
@@ -112,28 +112,14 @@ def compare_artifacts(stage: str, a: Path, b: Path) -> list[str]:
     return diffs
 
 
-def _versions(stage_dir: Path) -> list[str]:
-    """The complete artifacts of a stage folder (the robustness study makes several per
-    stage: the clean and the noisy pipeline, one evaluation per variant)."""
-    if not stage_dir.is_dir():
-        return []
-    return sorted(
-        d.name
-        for d in stage_dir.iterdir()
-        if d.is_dir()
-        and not d.is_symlink()
-        and not d.name.startswith(".")
-        and (d / "manifest.json").is_file()
-    )
-
-
 def compare(root_a: Path, root_b: Path) -> list[str]:
     """Differences between the two runs' artifacts, every version of every stage (empty when
     identical)."""
     diffs = []
     for stage in STAGES:
         top = "models" if stage in MODEL_STAGES else "data"
-        va, vb = _versions(root_a / top / stage), _versions(root_b / top / stage)
+        # every complete artifact (the robustness study makes several per stage)
+        va, vb = available_versions(root_a / top, stage), available_versions(root_b / top, stage)
         if va != vb:
             diffs.append(f"{stage}: the runs made different versions ({va} vs {vb})")
         if not va:
@@ -150,10 +136,7 @@ def compare(root_a: Path, root_b: Path) -> list[str]:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
-        "--workdir",
-        type=Path,
-        default=None,
-        help="where to put the two runs (default: a temporary folder)",
+        "--workdir", type=Path, help="the two runs' folder (default: a temporary one)"
     )
     parser.add_argument("--keep", action="store_true", help="keep the two runs' folders")
     parser.add_argument("overrides", nargs="*", help="extra Hydra overrides for every stage")

@@ -49,6 +49,8 @@ __all__ = ["StageLog", "default_blueprint", "quat_xyzw_from_matrix", "topic_for"
 
 RRD_NAME = "log.rrd"
 MCAP_NAME = "log.mcap"
+#: Rerun application id of a pipeline stage's log: this prefix and the stage's name.
+APP_ID_PREFIX = "binpick-"
 
 #: JSON schema of the scalar channels written by :meth:`StageLog.log_scalar`.
 SCALAR_JSON_SCHEMA: dict[str, Any] = {
@@ -171,6 +173,16 @@ class StageLog:
         )
         self._channels: dict[str, Any] = {}
 
+    @classmethod
+    def for_stage(
+        cls, folder: Path, stage: str, recording_id: str, blueprint: rrb.Blueprint | None = None
+    ) -> StageLog:
+        """The log of a pipeline stage's artifact: app id ``binpick-<stage>`` (one viewer group
+        per stage), ``recording_id`` its version key; in ``folder``, its work folder."""
+        return cls(
+            folder, app_id=APP_ID_PREFIX + stage, recording_id=recording_id, blueprint=blueprint
+        )
+
     # ------------------------------------------------------------------ lifecycle
     def __enter__(self) -> StageLog:
         return self
@@ -240,6 +252,21 @@ class StageLog:
         self._channel(topic, cls).log(
             msg, log_time=self._clock_ns if log_time is None else log_time
         )
+
+    def _mcap_image(self, entity: str, image: np.ndarray, encoding: str, frame_id: str) -> None:
+        """A ``RawImage`` of ``image`` (``(H, W)``, C-contiguous, in the byte order ``encoding``
+        names) on ``/{entity}``: ``step`` = W × its item size, ``data`` its bytes."""
+        h, w = image.shape
+        img = fxm.RawImage(
+            timestamp=_timestamp(self._clock_ns),
+            frame_id=frame_id,
+            width=w,
+            height=h,
+            encoding=encoding,
+            step=w * image.itemsize,
+            data=image.tobytes(),
+        )
+        self._mcap_log(topic_for(entity), fxc.RawImageChannel, img)
 
     # ------------------------------------------------------------------ camera
     def log_camera(
@@ -322,18 +349,8 @@ class StageLog:
         if d.ndim != 2:
             raise ValueError(f"depth must be (H, W), got {d.shape}")
         d = np.ascontiguousarray(d, dtype=np.float32)
-        h, w = d.shape
         self.rec.log(entity, rr.DepthImage(d, meter=1.0))
-        img = fxm.RawImage(
-            timestamp=_timestamp(self._clock_ns),
-            frame_id=frame_id,
-            width=w,
-            height=h,
-            encoding="32FC1",
-            step=w * 4,
-            data=d.astype("<f4", copy=False).tobytes(),
-        )
-        self._mcap_log(topic_for(entity), fxc.RawImageChannel, img)
+        self._mcap_image(entity, d.astype("<f4", copy=False), "32FC1", frame_id)
 
     def log_segmentation(self, entity: str, mask: np.ndarray, frame_id: str = "camera") -> None:
         """Log an instance segmentation mask.
@@ -352,18 +369,8 @@ class StageLog:
                 raise ValueError("mask ids must fit in uint8")
             m = m.astype(np.uint8)
         m = np.ascontiguousarray(m)
-        h, w = m.shape
         self.rec.log(entity, rr.SegmentationImage(m))
-        img = fxm.RawImage(
-            timestamp=_timestamp(self._clock_ns),
-            frame_id=frame_id,
-            width=w,
-            height=h,
-            encoding="mono8",
-            step=w,
-            data=m.tobytes(),
-        )
-        self._mcap_log(topic_for(entity), fxc.RawImageChannel, img)
+        self._mcap_image(entity, m, "mono8", frame_id)
 
     # ------------------------------------------------------------------ geometry
     @staticmethod
@@ -382,16 +389,31 @@ class StageLog:
             raise ValueError(f"{len(labels)} labels for {n} boxes")
         return c, s, q, n
 
-    def _boxes(
+    def log_boxes(
         self,
         entity: str,
         centers: np.ndarray,
         sizes: np.ndarray,
         quats_xyzw: np.ndarray,
-        labels: list[str] | None,
-        frame_id: str,
-        static: bool,
+        labels: list[str] | None = None,
+        frame_id: str = "world",
+        *,
+        static: bool = False,
     ) -> None:
+        """Log N oriented boxes in ``frame_id`` (``entity`` should live under that frame in Rerun).
+
+        ``centers``: ``(N, 3)`` metres; ``sizes``: ``(N, 3)`` full edge lengths in metres;
+        ``quats_xyzw``: ``(N, 4)`` unit quaternions (x, y, z, w) rotating box into frame;
+        ``labels``: N strings or None. N may be 0 (the previous boxes then disappear).
+        ``static``: fixed geometry (e.g. the bin walls): Rerun ``static=True``, MCAP
+        ``log_time = 0``; log it before the first timed message so the MCAP stays in time order.
+
+        Rerun: ``Boxes3D`` (centers, half_sizes = sizes / 2, quaternions, labels, class_ids
+        ``1..N`` in order) with every other component cleared.
+        MCAP: one ``SceneUpdate`` on ``/{entity}`` holding one ``SceneEntity`` (``id = entity``,
+        infinite lifetime, replacing the previous one) with N ``CubePrimitive`` and the labels
+        as ``label_<i>`` metadata.
+        """
         self._check_open()
         c, s, q, n = self._check_boxes(centers, sizes, quats_xyzw, labels)
         # clear_unset: components not given now (e.g. labels) must not linger from a previous
@@ -439,43 +461,6 @@ class StageLog:
             fxm.SceneUpdate(entities=[entity_msg]),
             log_time=clock,
         )
-
-    def log_boxes(
-        self,
-        entity: str,
-        centers: np.ndarray,
-        sizes: np.ndarray,
-        quats_xyzw: np.ndarray,
-        labels: list[str] | None = None,
-        frame_id: str = "world",
-    ) -> None:
-        """Log N oriented boxes in ``frame_id`` (``entity`` should live under that frame in Rerun).
-
-        ``centers``: ``(N, 3)`` metres; ``sizes``: ``(N, 3)`` full edge lengths in metres;
-        ``quats_xyzw``: ``(N, 4)`` unit quaternions (x, y, z, w) rotating box into frame;
-        ``labels``: N strings or None. N may be 0 (the previous boxes then disappear).
-
-        Rerun: ``Boxes3D`` (centers, half_sizes = sizes / 2, quaternions, labels, class_ids
-        ``1..N`` in order) with every other component cleared.
-        MCAP: one ``SceneUpdate`` on ``/{entity}`` holding one ``SceneEntity`` (``id = entity``,
-        infinite lifetime, replacing the previous one) with N ``CubePrimitive`` and the labels
-        as ``label_<i>`` metadata.
-        """
-        self._boxes(entity, centers, sizes, quats_xyzw, labels, frame_id, static=False)
-
-    def log_static_boxes(
-        self,
-        entity: str,
-        centers: np.ndarray,
-        sizes: np.ndarray,
-        quats_xyzw: np.ndarray,
-        labels: list[str] | None = None,
-        frame_id: str = "world",
-    ) -> None:
-        """Like :meth:`log_boxes` for fixed geometry (e.g. the bin walls): Rerun ``static=True``,
-        MCAP ``log_time = 0``. Call it before the first timed message so the MCAP stays in
-        time order."""
-        self._boxes(entity, centers, sizes, quats_xyzw, labels, frame_id, static=True)
 
     def log_points(
         self,

@@ -15,8 +15,8 @@ import contextlib
 
 import pybullet as p
 
-from pipeline.camera.geometry import quat_from_matrix
 from pipeline.controller.observation import Observation
+from pipeline.simulation.scene import collision_box
 
 
 class TruthHeap:
@@ -39,18 +39,7 @@ class TruthHeap:
         self.clear()
         for body, info in self.cell.boxes.items():
             T = pose_matrix(*self.cell.box_pose(body))
-            half = (info["size"] / 2).tolist()
-            shape = p.createCollisionShape(
-                p.GEOM_BOX, halfExtents=half, physicsClientId=self.client
-            )
-            self.mirror[body] = p.createMultiBody(
-                0.0,
-                shape,
-                -1,
-                basePosition=T[:3, 3].tolist(),
-                baseOrientation=quat_from_matrix(T[:3, :3]).tolist(),
-                physicsClientId=self.client,
-            )
+            self.mirror[body] = collision_box(self.client, info["size"], T)
 
     @contextlib.contextmanager
     def excluding(self, obs: Observation, uv, region):
