@@ -8,6 +8,7 @@ pixel the contact point, depth and approach axis are read from the image
 
 from __future__ import annotations
 
+import contextlib
 import math
 import warnings
 from collections.abc import Callable
@@ -16,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.mixture import GaussianMixture
+from threadpoolctl import ThreadpoolController
 
 from pipeline.dexnet.sampling import (
     Candidates,
@@ -86,6 +88,28 @@ class CEMResult:
     num_scored: int = 0
 
 
+# Threads of the BLAS and OpenMP libraries while a mixture is fitted and sampled (None: the
+# libraries' own setting). The mixtures are tiny (2-D, the elites: 50 points with conf/dexnet/):
+# their many small Cholesky factorisations and triangular solves (OpenBLAS) and the k-means that
+# starts them (scikit-learn's OpenMP loop, one chunk of up to 256 points) run on one thread
+# whatever the setting, but with more threads configured every call still wakes and synchronises
+# a thread pool, which on a busy machine (parallel trial workers) costs milliseconds per call:
+# most of a plan's time.
+# One thread changes no result (tests/test_dexnet_speed.py checks whole plans against None).
+GMM_THREADS: int | None = 1
+_CONTROLLER: list[ThreadpoolController] = []  # built on first use (it inspects the libraries)
+
+
+def _thread_limit():
+    """Context manager: BLAS and OpenMP limited to ``GMM_THREADS`` threads (no-op for None);
+    the previous settings come back on exit."""
+    if GMM_THREADS is None:
+        return contextlib.nullcontext()
+    if not _CONTROLLER:
+        _CONTROLLER.append(ThreadpoolController())
+    return _CONTROLLER[0].limit(limits=GMM_THREADS)
+
+
 def _score(score_fn: Callable[[Candidates], np.ndarray], cands: Candidates) -> np.ndarray:
     s = np.asarray(score_fn(cands), dtype=np.float64).reshape(-1)
     if s.shape != (len(cands),):
@@ -121,7 +145,7 @@ def _refit_and_sample(
     )
     parts: list[Candidates] = []
     collected = 0
-    with warnings.catch_warnings():
+    with warnings.catch_warnings(), _thread_limit():
         warnings.simplefilter("ignore", ConvergenceWarning)
         gmm.fit(x)
         for _r in range(max(cfg.max_resamples, 1)):

@@ -72,8 +72,22 @@ def crop_angle(axes_cam: np.ndarray) -> np.ndarray:
     return np.where(planar > 1e-6, np.arctan2(axes[:, 1], axes[:, 0]), 0.0)
 
 
+def crop_source(depth_m: np.ndarray) -> np.ndarray:
+    """The image the crops are cut from: (H, W) float32 depth, NaN where there is no data.
+
+    Computed once per depth image (:func:`extract_crops` takes it as ``source``, so the CEM's
+    scoring rounds on one image share it)."""
+    depth_m = np.asarray(depth_m, np.float32)
+    return np.where(depth_m > 0, depth_m, np.nan).astype(np.float32)
+
+
 def extract_crops(
-    depth_m: np.ndarray, uv: np.ndarray, depth: np.ndarray, axes_cam: np.ndarray, cfg: CropConfig
+    depth_m: np.ndarray,
+    uv: np.ndarray,
+    depth: np.ndarray,
+    axes_cam: np.ndarray,
+    cfg: CropConfig,
+    source: np.ndarray | None = None,
 ) -> np.ndarray:
     """Crops centred on candidates, rotated to their axes: (N, 1, S, S) float32.
 
@@ -82,19 +96,20 @@ def extract_crops(
         uv: (N, 2) candidate pixels (u, v).
         depth: (N,) candidate depths, metres.
         axes_cam: (N, 3) approach axes in the camera frame.
+        source: ``crop_source(depth_m)`` when the caller already has it (else computed here).
     """
-    depth_m = np.asarray(depth_m, np.float32)
     uv = np.asarray(uv, np.float64).reshape(-1, 2)
     n, s = len(uv), cfg.size
-    out = np.empty((n, 1, s, s), np.float32)
     if n == 0:
-        return out
+        return np.empty((n, 1, s, s), np.float32)
     # Missing data and the outside of the image read as NaN, replaced after the warp; the warp
     # is nearest-neighbour so that a hole never blends into a valid depth.
-    source = np.where(depth_m > 0, depth_m, np.nan).astype(np.float32)
+    if source is None:
+        source = crop_source(depth_m)
     scale = s / cfg.window_px
     angles = np.degrees(crop_angle(axes_cam))
     centre = float(s // 2)  # the candidate lands on a pixel centre: crop pixel (S/2, S/2)
+    crops = np.empty((n, s, s), np.float32)
     for i in range(n):
         u, v = uv[i]
         # Rotate the image by the axis angle about (u, v) so the axis points along +u, scale it
@@ -102,16 +117,21 @@ def extract_crops(
         m = cv2.getRotationMatrix2D((float(u), float(v)), float(angles[i]), scale)
         m[0, 2] += centre - u
         m[1, 2] += centre - v
-        crop = cv2.warpAffine(
+        cv2.warpAffine(
             source,
             m,
             (s, s),
+            dst=crops[i],
             flags=cv2.INTER_NEAREST,
             borderMode=cv2.BORDER_CONSTANT,
             borderValue=float("nan"),
         )
-        rel = (crop - float(depth[i])) / cfg.depth_scale
-        out[i, 0] = np.where(np.isfinite(rel), rel, cfg.missing_value)
+    # Heights relative to each candidate, all crops at once (float32, as crop by crop).
+    rel = (
+        crops - np.asarray(depth, np.float64).astype(np.float32)[:, None, None]
+    ) / cfg.depth_scale
+    out = np.empty((n, 1, s, s), np.float32)
+    out[:, 0] = np.where(np.isfinite(rel), rel, cfg.missing_value)
     return out
 
 
@@ -123,10 +143,12 @@ def pose_input(cands: Candidates, cfg: CropConfig) -> np.ndarray:
 
 
 def candidate_inputs(
-    depth_m: np.ndarray, cands: Candidates, cfg: CropConfig
+    depth_m: np.ndarray, cands: Candidates, cfg: CropConfig, source: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Crops (N, 1, S, S) and poses (N, 2) of candidates on one depth image."""
-    return extract_crops(depth_m, cands.uv, cands.depth, cands.axis, cfg), pose_input(cands, cfg)
+    """Crops (N, 1, S, S) and poses (N, 2) of candidates on one depth image (``source``: its
+    ``crop_source``, if the caller keeps it)."""
+    crops = extract_crops(depth_m, cands.uv, cands.depth, cands.axis, cfg, source)
+    return crops, pose_input(cands, cfg)
 
 
 class GQCNN(nn.Module):
@@ -162,7 +184,7 @@ class GQCNN(nn.Module):
         return self.head(torch.cat([x, self.pose_fc(poses)], dim=1)).squeeze(1)
 
 
-@torch.no_grad()
+@torch.inference_mode()
 def predict_quality(
     net: GQCNN, crops: np.ndarray, poses: np.ndarray, batch: int = 256
 ) -> np.ndarray:

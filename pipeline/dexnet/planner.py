@@ -44,7 +44,14 @@ from pipeline.camera.depth_input import check_depth_image
 from pipeline.camera.geometry import Intrinsics, backproject_pixels, ground_distance
 from pipeline.config.build import from_section
 from pipeline.dexnet.cem import CEMConfig, CEMResult, cross_entropy_method
-from pipeline.dexnet.gqcnn import GQCNN, CropConfig, GQCNNConfig, candidate_inputs, predict_quality
+from pipeline.dexnet.gqcnn import (
+    GQCNN,
+    CropConfig,
+    GQCNNConfig,
+    candidate_inputs,
+    crop_source,
+    predict_quality,
+)
 from pipeline.dexnet.quality import PlanarityConfig, disc_planarity
 from pipeline.dexnet.sampling import Candidates, PointCloudImage, SamplerConfig, point_cloud_image
 from pipeline.planner.planner import (
@@ -239,13 +246,20 @@ class DexNetPlanner:
             raise ValueError(f"the {variant} planner needs baseline_dir=<baseline artifact folder>")
         return cls.from_config(cfg, quality, T_world_cam, Path(baseline_dir) / model_file)
 
-    def score(self, depth_m: np.ndarray, cloud: PointCloudImage, cands: Candidates) -> np.ndarray:
-        """Quality of each candidate: (N,) in [0, 1]."""
+    def score(
+        self,
+        depth_m: np.ndarray,
+        cloud: PointCloudImage,
+        cands: Candidates,
+        source: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """Quality of each candidate: (N,) in [0, 1]. ``source``: ``crop_source(depth_m)``, kept
+        by the caller that scores several sets on one image (computed here otherwise)."""
         if len(cands) == 0:
             return np.zeros(0)
         if self.variant == "planarity":
             return disc_planarity(cloud, cands, self.planarity)
-        crops, poses = candidate_inputs(depth_m, cands, self.crop)
+        crops, poses = candidate_inputs(depth_m, cands, self.crop, source)
         return predict_quality(self.net, crops, poses)
 
     def run_cem(
@@ -274,8 +288,9 @@ class DexNetPlanner:
             self.last_reason = NO_OBJECT_PIXELS
             return none
         cloud = point_cloud_image(depth_m, intrinsics, self.sampler, object_mask=mask)
+        source = crop_source(depth_m) if self.variant == "gqcnn" else None  # once per image
         result = cross_entropy_method(
-            cloud, lambda c: self.score(depth_m, cloud, c), self.cem, self.sampler, rng
+            cloud, lambda c: self.score(depth_m, cloud, c, source), self.cem, self.sampler, rng
         )
         if len(result.best) == 0:
             self.last_reason = NO_CANDIDATES

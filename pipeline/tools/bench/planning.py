@@ -69,11 +69,14 @@ def planning_times(cfg, num_images: int = 8, repeats: int = 3) -> dict[str, floa
 
 def dexnet_figures(cfg, num_images: int = 6) -> dict[str, float]:
     """Dex-Net-style planner: median planning time per image of each variant (the GQ-CNN of
-    ``data/baseline/latest`` when it exists, else untrained weights of the same size), and the
-    GQ-CNN's training throughput (crops/s, batch 64)."""
+    ``data/baseline/latest`` when it exists, else untrained weights of the same size), the same
+    with the CEM's mixtures on the BLAS and OpenMP libraries' own thread setting instead of
+    ``pipeline.dexnet.cem.GMM_THREADS`` (``_gmm_threads_default_ms``, interleaved with the
+    first, same draws), and the GQ-CNN's training throughput (crops/s, batch 64)."""
     import torch
 
     from pipeline.artifacts.fingerprint import REPO_ROOT
+    from pipeline.dexnet import cem
     from pipeline.dexnet.gqcnn import GQCNN
     from pipeline.dexnet.planner import (
         DexNetPlanner,
@@ -112,15 +115,26 @@ def dexnet_figures(cfg, num_images: int = 6) -> dict[str, float]:
             )
             label = "untrained" if variant == "gqcnn" else "analytic"
         planner.plan(scenes[0].depth_m, intr)  # warm-up
-        times = []
-        for sc in scenes:
-            t0 = time.perf_counter()
-            planner.plan(sc.depth_m, intr)
-            times.append(time.perf_counter() - t0)
-        out[f"plan_dexnet_{variant}_ms"] = 1000 * float(np.median(times))
+        # The CEM's mixtures on cem.GMM_THREADS threads (as planned) and, for comparison, on the
+        # BLAS and OpenMP libraries' own thread setting: interleaved, same draws.
+        planned = cem.GMM_THREADS
+        times: dict[str, list[float]] = {"planned": [], "default": []}
+        try:
+            for k, sc in enumerate(scenes):
+                for name in list(times)[:: 1 if k % 2 == 0 else -1]:
+                    cem.GMM_THREADS = planned if name == "planned" else None
+                    t0 = time.perf_counter()
+                    planner.plan(sc.depth_m, intr, rng=np.random.default_rng([BENCH_SEED, 41, k]))
+                    times[name].append(time.perf_counter() - t0)
+        finally:
+            cem.GMM_THREADS = planned
+        key = f"plan_dexnet_{variant}"
+        out[f"{key}_ms"] = 1000 * float(np.median(times["planned"]))
+        out[f"{key}_gmm_threads_default_ms"] = 1000 * float(np.median(times["default"]))
         print(
-            f"planning, Dex-Net-style {variant} + CEM ({label}): "
-            f"{out[f'plan_dexnet_{variant}_ms']:.1f} ms/image"
+            f"planning, Dex-Net-style {variant} + CEM ({label}): {out[f'{key}_ms']:.1f} ms/image "
+            f"(mixtures on the libraries' own threads: "
+            f"{out[f'{key}_gmm_threads_default_ms']:.1f} ms/image)"
         )
     net = GQCNN(gqcnn_config(full)).train()
     opt = torch.optim.Adam(net.parameters(), lr=1e-3)
