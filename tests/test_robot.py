@@ -301,3 +301,64 @@ def test_many_obstacles_give_the_contacts_of_few():
         assert hits_seen > 0  # the descent does reach the cubes
     finally:
         p.disconnect(client)
+
+
+def _every_pair(robot, q, obstacles, ignore=(), margin=None, self_collision=True):
+    """``Robot.in_collision`` as it tests boxes without shortcuts: every obstacle's box read
+    from the engine, every (obstacle, link) pair and every self-collision pair by the box
+    test, then the engine's closest points."""
+    robot.set_joints(q)
+    cid, rid = robot.client, robot.body_id
+    margin = robot.cfg.collision_margin if margin is None else margin
+    m_self = robot.cfg.self_collision_margin
+    boxes = {j: p.getAABB(rid, j, physicsClientId=cid) for j in robot._links}
+
+    def near(a, b, m):
+        return all(a[0][k] <= b[1][k] + m and b[0][k] <= a[1][k] + m for k in range(3))
+
+    found = []
+    for body in [b for b in dict.fromkeys(obstacles) if b not in {*ignore, rid}]:
+        other = p.getAABB(body, physicsClientId=cid)
+        for link in robot._links[1:]:  # not the fixed base (-1)
+            if near(boxes[link], other, margin) and p.getClosestPoints(
+                rid, body, margin, linkIndexA=link, physicsClientId=cid
+            ):
+                found.append((robot.link_name[link], body))
+    for a, b in robot.self_collision_pairs if self_collision else ():
+        if near(boxes[a], boxes[b], m_self) and p.getClosestPoints(
+            rid, rid, m_self, linkIndexA=a, linkIndexB=b, physicsClientId=cid
+        ):
+            found.append((robot.link_name[a], rid))
+    return found
+
+
+def test_collision_shortcuts_give_the_contacts_of_every_pair(cell):
+    """``in_collision`` skips the links of an obstacle clear of the box around all links, and
+    inside ``obstacles_still`` reads the obstacles' boxes once: on random joints near boxes in
+    the bin, the same contacts, in the same order, as testing every pair."""
+    client, robot, bodies = cell
+    rng = np.random.default_rng(3)
+    boxes = [
+        _static_box(client, [rng.uniform(-0.25, 0.25), rng.uniform(-0.2, 0.2), 0.05], [0.05] * 3)
+        for _ in range(8)
+    ]
+    obstacles = [*bodies, *boxes]
+    lo, hi = robot.joint_limits[:, 0], robot.joint_limits[:, 1]
+    home = robot.home_q()
+    try:
+        contacts = 0
+        for i in range(120):
+            q = np.clip(home + rng.normal(0, 0.6, len(home)), lo, hi)
+            kwargs = {"margin": 0.02, "self_collision": False} if i % 3 == 2 else {}
+            ignore = boxes[:1] if i % 2 else []
+            expected = _every_pair(robot, q, obstacles, ignore, **kwargs)
+            assert robot.in_collision(q, obstacles, ignore, **kwargs) == expected
+            with robot.obstacles_still():
+                assert robot.in_collision(q, obstacles, ignore, **kwargs) == expected
+                assert robot.in_collision(q, obstacles, ignore, **kwargs) == expected
+            contacts += bool(expected)
+        assert 5 <= contacts <= 115  # both outcomes are tested
+    finally:
+        robot.set_joints(home)
+        for b in boxes:
+            p.removeBody(b, physicsClientId=client)

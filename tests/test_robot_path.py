@@ -3,6 +3,7 @@ sampled collision check of its motion (pipeline/robot/path.py), by hand."""
 
 from __future__ import annotations
 
+import contextlib
 import math
 from types import SimpleNamespace
 
@@ -39,6 +40,9 @@ class _CountingRobot:
     def __init__(self, hit):
         self.cfg = SimpleNamespace(collision_margin=0.005)
         self.hit, self.checked, self.q = hit, [], None
+
+    def obstacles_still(self):
+        return contextlib.nullcontext()
 
     def in_collision(self, q, obstacles, ignore, margin=None, self_collision=True):
         if q is not None:

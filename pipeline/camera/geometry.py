@@ -10,6 +10,7 @@ Poses are 4 × 4 homogeneous matrices ``T_a_b`` mapping points in frame b to fra
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -134,11 +135,21 @@ def rotation_matrices(quats_xyzw: np.ndarray) -> np.ndarray:
 
 
 def pose_matrix(position: np.ndarray, quat_xyzw: np.ndarray) -> np.ndarray:
-    """4 × 4 pose from a position (3,) and a unit quaternion (x, y, z, w)."""
-    T = np.eye(4)
-    T[:3, :3] = rotation_matrices(quat_xyzw)
-    T[:3, 3] = position
-    return T
+    """4 × 4 pose from a position (3,) and a unit quaternion (x, y, z, w).
+
+    The rotation is :func:`rotation_matrices`' formula on Python floats (one pose is too small
+    for numpy's per-call overhead to pay): the same products and sums in the same order, so the
+    same bits."""
+    x, y, z, w = np.asarray(quat_xyzw, dtype=np.float64).reshape(4).tolist()
+    px, py, pz = np.asarray(position, dtype=np.float64).reshape(3).tolist()
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w), px],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w), py],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y), pz],
+            [0.0, 0.0, 0.0, 1.0],
+        ]
+    )
 
 
 def quat_from_matrix(R: np.ndarray) -> np.ndarray:
@@ -181,3 +192,41 @@ def gravity_in_camera(T_world_cam: np.ndarray) -> np.ndarray:
     """World gravity direction (0, 0, -1) in the camera frame of pose ``T_world_cam`` (4, 4):
     (3,) unit vector."""
     return np.asarray(T_world_cam, np.float64)[:3, :3].T @ np.array([0.0, 0.0, -1.0])
+
+
+# Small vectors on Python floats. The servo's control law, its predicted motion and the robot's
+# checks work on (3,) vectors and (3, 3) rotations thousands of times per scene, where numpy's
+# per-call overhead outweighs the arithmetic. Each helper gives the float64 bits of the numpy
+# expression it stands for (tests/test_small_vectors.py compares them on random vectors): the
+# same products and sums in the same order, without fused multiply-adds; numpy's dot products
+# (``a @ b``, ``np.linalg.norm``, ``R.T @ v``) add their terms in index order to a sum that
+# starts at +0.0, which the helpers do too (an all −0 sum is +0 in both).
+
+
+def cross3(a, b) -> tuple[float, float, float]:
+    """``np.cross(a, b)`` of two 3-vectors of floats, as a tuple."""
+    a0, a1, a2 = a
+    b0, b1, b2 = b
+    return (a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0)
+
+
+def dot3(a, b) -> float:
+    """``a @ b`` of two 3-vectors of floats (numpy's dot: terms in order, from +0.0)."""
+    return 0.0 + a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def norm3(a) -> float:
+    """``np.linalg.norm(a)`` of a 3-vector of floats: the square root of ``a @ a``."""
+    return math.sqrt(0.0 + a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+
+
+def rotate_back(R, v) -> tuple[float, float, float]:
+    """``R.T @ v`` (3,) of a rotation ``R`` given as 3 rows of 3 floats (``R.tolist()``) and a
+    3-vector of floats: the world-to-frame rotation of a pose's ``R_world_frame``."""
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R
+    v0, v1, v2 = v
+    return (
+        0.0 + r00 * v0 + r10 * v1 + r20 * v2,
+        0.0 + r01 * v0 + r11 * v1 + r21 * v2,
+        0.0 + r02 * v0 + r12 * v1 + r22 * v2,
+    )

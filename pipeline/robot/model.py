@@ -9,6 +9,7 @@ Joint vectors ``q`` are (7,) float64 radians in the order of :attr:`Robot.joint_
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -136,6 +137,7 @@ class Robot:
         self.pedestal_id: int | None = None
         self._home_q: np.ndarray | None = None
         self._restart_offsets: np.ndarray | None = None
+        self._still_boxes: dict | None = None  # obstacles' boxes inside obstacles_still()
         self.joint_names: list[str] = []  # filled by load(): joint1 … joint6, joint7 (hand)
         self.joint_limits = np.zeros((0, 2))  # (7, 2) [lower, upper] radians, after load()
 
@@ -234,8 +236,9 @@ class Robot:
     def set_joints(self, q: Sequence[float]) -> None:
         """Teleport the joints to ``q`` (7,), radians (zero velocity)."""
         self._require_loaded()
+        values = np.asarray(q, dtype=np.float64).reshape(-1).tolist()
         p.resetJointStatesMultiDof(
-            self.body_id, self.joint_indices, [[float(v)] for v in q], physicsClientId=self.client
+            self.body_id, self.joint_indices, [[v] for v in values], physicsClientId=self.client
         )
 
     def joints(self) -> np.ndarray:
@@ -451,7 +454,8 @@ class Robot:
         ignore = set(ignore_body_ids) | {rid}
         found: list[Contact] = []
         wanted = [b for b in dict.fromkeys(obstacle_body_ids) if b not in ignore]
-        near_link = None
+        tested = [j for j in self._links if j != -1]  # the fixed base is not tested
+        near_link, around = None, None
         if len(wanted) > _BROADPHASE_MIN_OBSTACLES:
             pool = set(wanted)
             near_link = {}
@@ -464,11 +468,20 @@ class Robot:
                     or ()
                 )
                 near_link[link] = {b for b, _ in hits if b in pool}
+        elif wanted and tested:
+            # The box around all tested links: an obstacle clear of it is clear of every link
+            # (min ≤ each link's min, max ≥ each link's max, and x + margin grows with x), so
+            # the test of each link is skipped for it.
+            lows, highs = [boxes[j][0] for j in tested], [boxes[j][1] for j in tested]
+            around = (tuple(map(min, *lows)), tuple(map(max, *highs)))
         for body in wanted:
-            other = None if near_link is not None else p.getAABB(body, physicsClientId=cid)
-            for link in self._links:
-                if link == -1:
+            if near_link is None:
+                if around is None:
+                    break  # no link to test
+                other = self._obstacle_box(body)
+                if not _overlap(around, other, margin):
                     continue
+            for link in tested:
                 if near_link is not None:
                     if body not in near_link[link]:
                         continue
@@ -482,6 +495,30 @@ class Robot:
             ):
                 found.append(Contact(self.link_name[a], rid))
         return found
+
+    def _obstacle_box(self, body: int):
+        """``p.getAABB(body)``; inside :meth:`obstacles_still`, read from the engine once."""
+        still = self._still_boxes
+        if still is None:
+            return p.getAABB(body, physicsClientId=self.client)
+        box = still.get(body)
+        if box is None:
+            box = still[body] = p.getAABB(body, physicsClientId=self.client)
+        return box
+
+    @contextlib.contextmanager
+    def obstacles_still(self):
+        """A block in which only this robot moves: :meth:`in_collision` reads each obstacle's
+        box from the engine once instead of at every call (the same boxes, so the same
+        contacts). For the many checks along one motion (``pipeline.robot.path``)."""
+        if self._still_boxes is not None:  # nested: the outer block keeps the boxes
+            yield
+            return
+        self._still_boxes = {}
+        try:
+            yield
+        finally:
+            self._still_boxes = None
 
     # ----------------------------------------------------------------------------- home
     def home_camera_pose(self) -> np.ndarray:

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from pipeline.camera.geometry import norm3
 from pipeline.config.build import from_section
 
 
@@ -65,7 +66,7 @@ def _angle_deg(R_a: np.ndarray, R_b: np.ndarray) -> float:
 def substeps(T_a: np.ndarray, T_b: np.ndarray, step_m: float, step_deg: float) -> int:
     """The fewest equal parts of the step from camera pose ``T_a`` to ``T_b`` (4, 4) in which
     the camera moves at most ``step_m`` and turns at most ``step_deg`` (at least 1)."""
-    dist = float(np.linalg.norm(T_b[:3, 3] - T_a[:3, 3]))
+    dist = norm3((T_b[:3, 3] - T_a[:3, 3]).tolist())
     return max(
         1,
         int(math.ceil(max(dist / step_m, _angle_deg(T_a[:3, :3], T_b[:3, :3]) / step_deg) - 1e-9)),
@@ -92,18 +93,19 @@ def check_motion(
     plain = [o for o in obstacle_ids if o not in padded]
     margin = robot.cfg.collision_margin + cfg.bin_clearance
     count = 0
-    for i in range(len(q) - 1):
-        n = substeps(poses[i], poses[i + 1], cfg.step_m, cfg.step_deg)
-        for k in range(1, n + 1):
-            qk = q[i] + (k / n) * (q[i + 1] - q[i])
-            count += 1
-            hits = robot.in_collision(qk, plain, ignore_body_ids)
-            if padded and not hits:  # the robot is at qk already
-                hits = robot.in_collision(
-                    None, padded, ignore_body_ids, margin=margin, self_collision=False
-                )
-            if hits:
-                return PathResult(False, "collision", i, count, list(hits))
+    with robot.obstacles_still():  # only the robot moves here
+        for i in range(len(q) - 1):
+            n = substeps(poses[i], poses[i + 1], cfg.step_m, cfg.step_deg)
+            for k in range(1, n + 1):
+                qk = q[i] + (k / n) * (q[i + 1] - q[i])
+                count += 1
+                hits = robot.in_collision(qk, plain, ignore_body_ids)
+                if padded and not hits:  # the robot is at qk already
+                    hits = robot.in_collision(
+                        None, padded, ignore_body_ids, margin=margin, self_collision=False
+                    )
+                if hits:
+                    return PathResult(False, "collision", i, count, list(hits))
     return PathResult(True, None, len(q) - 1, count)
 
 

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from pipeline.camera.geometry import cross3
+
 # Signed camera-y of the cup that must sit over the surface centre, per pattern, in units of
 # cup_offset. B: the surface centre lies on the optical axis, between the cups.
 _CUP_Y_SIGN = {"L": -1.0, "R": 1.0, "B": 0.0}
@@ -77,7 +79,7 @@ def target_camera_pose(
     if np.linalg.norm(x) < 1e-6:
         raise ValueError("x_axis_cam is parallel to the normal; give an in-plane direction")
     x /= np.linalg.norm(x)
-    y = np.cross(z, x)
+    y = np.array(cross3(z.tolist(), x.tolist()))  # np.cross(z, x)
     T = np.eye(4)
     T[:3, :3] = np.column_stack([x, y, z])
     T[:3, 3] = c + standoff * n - sign * cup_offset * y
@@ -103,4 +105,4 @@ def rotate_about(axis: np.ndarray, normal: np.ndarray, degrees: float) -> np.nda
     a = np.asarray(axis, np.float64)
     a = a - (a @ n) * n
     t = np.radians(degrees)
-    return np.cos(t) * a + np.sin(t) * np.cross(n, a)
+    return np.cos(t) * a + np.sin(t) * np.array(cross3(n.tolist(), a.tolist()))  # n × a

@@ -73,10 +73,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.camera.geometry import cross3, dot3, norm3
 from pipeline.config.build import from_section
 
-_N_X = np.array([1.0, 0.0, 0.0])
-_N_Z = np.array([0.0, 0.0, 1.0])
+_N_X = (1.0, 0.0, 0.0)
+_N_Z = (0.0, 0.0, 1.0)
 _OFF_SIGN = {"L": -1.0, "B": 0.0, "R": 1.0}  # Eq. 18, in units of cup_offset
 
 
@@ -151,42 +152,65 @@ def _pattern_name(pattern) -> str:
     return name
 
 
-def _vec3(v, what: str) -> np.ndarray:
-    a = np.asarray(v, dtype=np.float64).reshape(-1)
-    if a.shape != (3,) or not np.all(np.isfinite(a)):
+# The law runs on Python floats: a few dozen operations on 3-vectors per control period, where
+# numpy's per-call overhead would cost more than the arithmetic. The helpers of
+# pipeline.camera.geometry (cross3, dot3, norm3) give numpy's bits, so every float here is the
+# one the same formulas give on (3,) arrays.
+Vec3 = tuple[float, float, float]
+
+
+def _vec3(v, what: str) -> Vec3:
+    """``v`` as three finite float64 values (a tuple), else ValueError."""
+    if type(v) is tuple and len(v) == 3 and all(type(c) is float for c in v):
+        a = v
+    else:
+        arr = np.asarray(v, dtype=np.float64).reshape(-1)
+        if arr.shape != (3,):
+            raise ValueError(f"{what} must be a finite (3,) vector, got {v!r}")
+        a = tuple(arr.tolist())
+    if not (math.isfinite(a[0]) and math.isfinite(a[1]) and math.isfinite(a[2])):
         raise ValueError(f"{what} must be a finite (3,) vector, got {v!r}")
     return a
 
 
-def _angle(a: np.ndarray, b: np.ndarray) -> float:
+def _angle(a: Vec3, b: Vec3) -> float:
     """Angle between two vectors (rad), atan2 form of the arccos of Eqs. 25–27."""
-    return math.atan2(float(np.linalg.norm(np.cross(a, b))), float(a @ b))
+    return math.atan2(norm3(cross3(a, b)), dot3(a, b))
 
 
-def _axis_angle_to(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def _axis_angle_to(a: Vec3, b: Vec3) -> Vec3:
     """``(a × b)/|a × b| · θ(a, b)``: the rotation taking direction ``a`` onto ``b`` (3,)."""
-    c = np.cross(a, b)
-    s = float(np.linalg.norm(c))
+    c = cross3(a, b)
+    s = norm3(c)
     if s < 1e-12:
-        return np.zeros(3)  # parallel (θ = 0); antiparallel cannot happen for visible surfaces
-    return c / s * _angle(a, b)
+        return (0.0, 0.0, 0.0)  # parallel (θ = 0); antiparallel cannot happen for visible surfaces
+    theta = math.atan2(s, dot3(a, b))  # _angle(a, b)
+    return (c[0] / s * theta, c[1] / s * theta, c[2] / s * theta)
 
 
 def target_features(pattern, cfg: ServoConfig) -> np.ndarray:
     """``p_e*`` (3,) of Eqs. 17–18: ``[0, off/d*, log d*]``, off = −/0/+ cup_offset for L/B/R;
     or, with ``cfg.target_point``, that point's features (Eq. 16)."""
+    return np.array(_target_features(pattern, cfg))
+
+
+def _target_features(pattern, cfg: ServoConfig) -> Vec3:
     if cfg.target_point is not None:
-        return current_features(cfg.target_point)
+        return _features(_vec3(cfg.target_point, "center_cam"))
     off = _OFF_SIGN[_pattern_name(pattern)] * cfg.cup_offset
-    return np.array([0.0, off / cfg.standoff, math.log(cfg.standoff)])
+    return (0.0, off / cfg.standoff, math.log(cfg.standoff))
 
 
 def current_features(center_cam) -> np.ndarray:
     """``p_e`` (3,) of Eq. 16: ``[X/Z, Y/Z, log Z]`` of the surface centre (camera frame, m)."""
-    X, Y, Z = _vec3(center_cam, "center_cam")
+    return np.array(_features(_vec3(center_cam, "center_cam")))
+
+
+def _features(center: Vec3) -> Vec3:
+    X, Y, Z = center
     if Z <= 0:
         raise ValueError(f"the surface centre must be in front of the camera (Z > 0), got Z={Z}")
-    return np.array([X / Z, Y / Z, math.log(Z)])
+    return (X / Z, Y / Z, math.log(Z))
 
 
 def warp_axis(axis_cam, normal_cam) -> np.ndarray:
@@ -197,56 +221,89 @@ def warp_axis(axis_cam, normal_cam) -> np.ndarray:
     does to the surface), so the result lies in the camera XY plane. ``normal_cam`` points
     towards the camera (project convention). Returns a unit vector with z = 0.
     """
-    a = _vec3(axis_cam, "axis_cam")
-    n = -_vec3(normal_cam, "normal_cam")
-    n = n / np.linalg.norm(n)
+    return np.array(_warp(_vec3(axis_cam, "axis_cam"), warp_rotation(normal_cam)))
+
+
+def warp_rotation(normal_cam) -> tuple[Vec3, float, float, float] | None:
+    """The rotation of :func:`warp_axis` for one normal (3,), towards the camera: its unit axis,
+    cos θ, sin θ and 1 − cos θ; None when the normal is along camera Z already. For warping
+    several axes of one surface (:func:`warp`)."""
+    n0, n1, n2 = _vec3(normal_cam, "normal_cam")
+    n = (-n0, -n1, -n2)
+    length = norm3(n)
+    if length == 0.0:
+        raise ValueError("normal_cam has zero length")
+    n = (n[0] / length, n[1] / length, n[2] / length)
     rv = _axis_angle_to(n, _N_Z)
-    th = float(np.linalg.norm(rv))
-    if th > 0:
-        k = rv / th  # Rodrigues
-        a = a * math.cos(th) + np.cross(k, a) * math.sin(th) + k * (k @ a) * (1 - math.cos(th))
-    a = np.array([a[0], a[1], 0.0])
-    norm = np.linalg.norm(a)
+    th = norm3(rv)
+    if not th > 0:
+        return None
+    k = (rv[0] / th, rv[1] / th, rv[2] / th)  # Rodrigues
+    c = math.cos(th)
+    return k, c, math.sin(th), 1 - c
+
+
+def warp(axis_cam, rotation: tuple[Vec3, float, float, float] | None) -> Vec3:
+    """:func:`warp_axis` of ``axis_cam`` (3,) with the normal's :func:`warp_rotation`, as a
+    tuple of floats."""
+    return _warp(_vec3(axis_cam, "axis_cam"), rotation)
+
+
+def _warp(a: Vec3, rotation) -> Vec3:
+    if rotation is not None:
+        k, c, s, c1 = rotation
+        ka = dot3(k, a)
+        x = cross3(k, a)
+        # a cos θ + (k × a) sin θ + k (k · a)(1 − cos θ), summed as numpy sums the arrays
+        a = (
+            a[0] * c + x[0] * s + k[0] * ka * c1,
+            a[1] * c + x[1] * s + k[1] * ka * c1,
+            a[2] * c + x[2] * s + k[2] * ka * c1,
+        )
+    a = (a[0], a[1], 0.0)
+    norm = norm3(a)
     if norm < 1e-9:
         raise ValueError("axis_cam is parallel to the normal")
-    return a / norm
+    return (a[0] / norm, a[1] / norm, a[2] / norm)
 
 
-def _line_term(axis: np.ndarray) -> tuple[float, np.ndarray] | None:
+def _line_term(axis: Vec3) -> tuple[float, Vec3] | None:
     """(angle to X, rotation term) of one warped axis taken as a line in the image plane."""
-    a = np.array([axis[0], axis[1], 0.0])  # image-plane direction (see module docstring)
-    norm = float(np.linalg.norm(a))
+    a = (axis[0], axis[1], 0.0)  # image-plane direction (see module docstring)
+    norm = norm3(a)
     if norm < 1e-9:
         return None
-    a /= norm
-    if a @ _N_X < 0:  # an axis is a line: take the direction within 90° of X
-        a = -a
+    a = (a[0] / norm, a[1] / norm, a[2] / norm)
+    if dot3(a, _N_X) < 0:  # an axis is a line: take the direction within 90° of X
+        a = (-a[0], -a[1], -a[2])
     return _angle(a, _N_X), _axis_angle_to(a, _N_X)
 
 
-def _signed_term(axis: np.ndarray, reference: np.ndarray) -> tuple[float, np.ndarray] | None:
+def _signed_term(axis: Vec3, reference: Vec3) -> tuple[float, Vec3] | None:
     """(angle to the reference, rotation term) of a warped axis signed to within 90° of the
     image-plane ``reference``: the term turns the camera about Z until that signed axis is its
     X, by the signed in-plane angle atan2((a × X)_z, a · X), which stays defined at 180°."""
-    a = np.array([axis[0], axis[1], 0.0])
-    r = np.array([reference[0], reference[1], 0.0])
-    na, nr = float(np.linalg.norm(a)), float(np.linalg.norm(r))
+    a = (axis[0], axis[1], 0.0)
+    r = (reference[0], reference[1], 0.0)
+    na, nr = norm3(a), norm3(r)
     if na < 1e-9 or nr < 1e-9:
         return None
-    a, r = a / na, r / nr
-    if a @ r < 0:
-        a = -a
-    return _angle(a, r), np.array([0.0, 0.0, math.atan2(-a[1], a[0])])
+    a = (a[0] / na, a[1] / na, a[2] / na)
+    r = (r[0] / nr, r[1] / nr, r[2] / nr)
+    if dot3(a, r) < 0:
+        a = (-a[0], -a[1], -a[2])
+    return _angle(a, r), (0.0, 0.0, math.atan2(-a[1], a[0]))
 
 
 def _rotation_error(
     normal_cam, warped_long, warped_short, reference_x=None
-) -> tuple[np.ndarray, str | None]:
+) -> tuple[Vec3, str | None]:
     n_towards = _vec3(normal_cam, "normal_cam")
-    norm = float(np.linalg.norm(n_towards))
+    norm = norm3(n_towards)
     if norm < 1e-12:
         raise ValueError("normal_cam has zero length")
-    n = -n_towards / norm  # paper's n: the direction camera Z must align with (away from camera)
+    # paper's n: the direction camera Z must align with (away from camera)
+    n = (-n_towards[0] / norm, -n_towards[1] / norm, -n_towards[2] / norm)
     u_theta = _axis_angle_to(n, _N_Z)  # first term of Eq. 24 (unit axis × θ_{n,n_Z})
     if reference_x is None:  # the paper: the axis line nearest camera X
         term = _line_term
@@ -256,9 +313,11 @@ def _rotation_error(
     long_ = term(_vec3(warped_long, "warped_long"))
     short = term(_vec3(warped_short, "warped_short"))
     if long_ is not None and (short is None or long_[0] < short[0]):
-        return u_theta + long_[1], "long"
+        t = long_[1]
+        return (u_theta[0] + t[0], u_theta[1] + t[1], u_theta[2] + t[2]), "long"
     if short is not None:
-        return u_theta + short[1], "short"
+        t = short[1]
+        return (u_theta[0] + t[0], u_theta[1] + t[1], u_theta[2] + t[2]), "short"
     return u_theta, None
 
 
@@ -276,7 +335,7 @@ def rotation_error(normal_cam, warped_long, warped_short) -> np.ndarray:
         warped_long, warped_short: (3,) warped-perspective long and short axes (image-plane
             directions; sign and length do not matter).
     """
-    return _rotation_error(normal_cam, warped_long, warped_short)[0]
+    return np.array(_rotation_error(normal_cam, warped_long, warped_short)[0])
 
 
 def interaction_matrix(p_e, Z: float, cfg: ServoConfig) -> np.ndarray:
@@ -286,13 +345,18 @@ def interaction_matrix(p_e, Z: float, cfg: ServoConfig) -> np.ndarray:
     """
     x, y = float(p_e[0]), float(p_e[1])
     rho = Z / cfg.standoff
-    L_v = np.array([[-1.0, 0.0, x], [0.0, -1.0, y], [0.0, 0.0, -1.0]])
-    L_w = np.array([[x * y, -(1 + x * x), y], [1 + y * y, -x * y, -x], [-y, x, 0.0]])
-    M = np.zeros((6, 6))
-    M[:3, :3] = L_v / (cfg.standoff * rho)
-    M[:3, 3:] = L_w
-    M[3:, 3:] = np.eye(3)
-    return M
+    d = cfg.standoff * rho
+    # L_v = [[-1, 0, x], [0, -1, y], [0, 0, -1]] divided by d* ρ, entry by entry
+    return np.array(
+        [
+            [-1.0 / d, 0.0 / d, x / d, x * y, -(1 + x * x), y],
+            [0.0 / d, -1.0 / d, y / d, 1 + y * y, -x * y, -x],
+            [0.0 / d, 0.0 / d, -1.0 / d, -y, x, 0.0],
+            [0.0, 0.0, 0.0, 1.0, 0.0, 0.0],
+            [0.0, 0.0, 0.0, 0.0, 1.0, 0.0],
+            [0.0, 0.0, 0.0, 0.0, 0.0, 1.0],
+        ]
+    )
 
 
 def clamp_twist(twist, cfg: ServoConfig) -> tuple[np.ndarray, float]:
@@ -302,7 +366,8 @@ def clamp_twist(twist, cfg: ServoConfig) -> tuple[np.ndarray, float]:
     parts are scaled separately (the returned scale is the smaller factor). Directions are kept.
     """
     t = np.asarray(twist, dtype=np.float64).reshape(6)
-    v, w = float(np.linalg.norm(t[:3])), float(np.linalg.norm(t[3:]))
+    values = t.tolist()
+    v, w = norm3(values[:3]), norm3(values[3:])
     s_v = min(1.0, cfg.max_linear_speed / v) if v > 0 else 1.0
     s_w = min(1.0, cfg.max_angular_speed / w) if w > 0 else 1.0
     if cfg.uniform_clamp:
@@ -345,29 +410,31 @@ def servo_velocity(
     else:
         lam = cfg.gain
     center = _vec3(center_cam, "center_cam")
-    p_e = current_features(center)
-    e_p = p_e - target_features(pattern, cfg)
+    p_e = _features(center)
+    p_t = _target_features(pattern, cfg)
+    e_p = (p_e[0] - p_t[0], p_e[1] - p_t[1], p_e[2] - p_t[2])
     u_theta, axis_used = _rotation_error(normal_cam, warped_long, warped_short, reference_x)
-    e = np.concatenate([e_p, u_theta])
+    e = np.array(e_p + u_theta)
     M = interaction_matrix(p_e, center[2], cfg)
     raw = -lam * np.linalg.solve(M, e)
     vel, scale = clamp_twist(raw, cfg)
-    rot_deg = math.degrees(float(np.linalg.norm(u_theta)))
+    rot_deg = math.degrees(norm3(u_theta))
     converged = bool(
         abs(e_p[0]) < cfg.tolerance_xy
         and abs(e_p[1]) < cfg.tolerance_xy
         and abs(e_p[2]) < cfg.tolerance_log_z
         and rot_deg < cfg.tolerance_rot_deg
     )
+    speeds = vel.tolist()
     return ServoCommand(
         velocity=vel,
         error=e,
         converged=converged,
         raw_velocity=raw,
         scale=scale,
-        feature_error=float(np.linalg.norm(e_p)),
+        feature_error=norm3(e_p),
         rotation_error_deg=rot_deg,
-        linear_speed=float(np.linalg.norm(vel[:3])),
-        angular_speed=float(np.linalg.norm(vel[3:])),
+        linear_speed=norm3(speeds[:3]),
+        angular_speed=norm3(speeds[3:]),
         axis_used=axis_used,
     )

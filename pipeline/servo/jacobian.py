@@ -15,7 +15,7 @@ import numpy as np
 import pybullet as p
 
 
-def camera_jacobian(robot, q) -> np.ndarray:
+def camera_jacobian(robot, q, T_world_cam: np.ndarray | None = None) -> np.ndarray:
     """``J_c`` (6, n): joint velocities → camera-frame twist ``[V; Ω]`` at joints ``q``.
 
     pybullet's ``calculateJacobian`` on ``robot.camera_link`` gives the world-frame linear
@@ -26,12 +26,17 @@ def camera_jacobian(robot, q) -> np.ndarray:
     robot's 7 revolute joints, in joint-index order = the order of ``q``); velocities and
     accelerations are zero. Both 3-row blocks are then rotated into the camera frame by
     ``R_cam_world = R_world_camᵀ``. The robot is left at ``q``.
+
+    ``T_world_cam``: the camera pose (4, 4) at ``q`` when the caller has it and the robot
+    stands at ``q`` already (``robot.camera_pose(q)`` was the last thing to move it); None: it
+    is computed here (forward kinematics, which puts the robot at ``q``).
     """
     robot._require_loaded()
     q = np.asarray(q, dtype=np.float64).reshape(-1)
     if q.shape != (len(robot.joint_indices),):
         raise ValueError(f"q must have {len(robot.joint_indices)} entries, got {q.shape}")
-    T_world_cam = robot.camera_pose(q)  # sets the joints to q (FK)
+    if T_world_cam is None:
+        T_world_cam = robot.camera_pose(q)  # sets the joints to q (FK)
     st = p.getLinkState(robot.body_id, robot.camera_link, physicsClientId=robot.client)
     p_in, quat_in = np.asarray(st[2]), st[3]  # inertial frame in the URDF link frame
     R_in = np.asarray(p.getMatrixFromQuaternion(quat_in)).reshape(3, 3)

@@ -22,7 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.servo.control import ServoConfig, servo_velocity, warp_axis
+from pipeline.camera.geometry import rotate_back
+from pipeline.servo.control import ServoConfig, servo_velocity, warp, warp_rotation
 from pipeline.servo.jacobian import camera_jacobian, integrate, joint_velocities
 
 # Consecutive clamped periods after which the closed loop gives up ("joint_limits").
@@ -77,21 +78,30 @@ def servo_motion(
         max_joint_speed: rad/s (``motion.max_joint_speed``).
         reference_x_w: (3,) optional, where the hand's X should point (world).
     """
-    centre_w, normal_w = np.asarray(centre_w, np.float64), np.asarray(normal_w, np.float64)
-    long_w, short_w = np.asarray(long_w, np.float64), np.asarray(short_w, np.float64)
+    # The surface, world frame, as floats: each period rotates it into the camera frame with
+    # pipeline.camera.geometry's rotate_back, the bits of R.T @ v.
+    centre_w, normal_w, long_w, short_w = (
+        np.asarray(v, np.float64).reshape(3).tolist() for v in (centre_w, normal_w, long_w, short_w)
+    )
+    if reference_x_w is not None:
+        reference_x_w = np.asarray(reference_x_w, np.float64).reshape(3).tolist()
     q = np.asarray(q_start, np.float64)
     qs, poses = [q], []
     goal, limit_hits = 0, 0
     for step in range(max_steps + 1):
         T = robot.camera_pose(q)
         poses.append(T)
-        R, t = T[:3, :3], T[:3, 3]
-        centre = R.T @ (centre_w - t)
+        rows = T[:3].tolist()
+        R = [row[:3] for row in rows]
+        centre = rotate_back(
+            R, (centre_w[0] - rows[0][3], centre_w[1] - rows[1][3], centre_w[2] - rows[2][3])
+        )
         if centre[2] <= 1e-3:
             return ServoMotion(np.array(qs), poses, "lost")
-        normal = R.T @ normal_w
-        wl, ws = warp_axis(R.T @ long_w, normal), warp_axis(R.T @ short_w, normal)
-        ref = None if reference_x_w is None else R.T @ np.asarray(reference_x_w, np.float64)
+        normal = rotate_back(R, normal_w)
+        warp_by = warp_rotation(normal)  # one rotation for both axes
+        wl, ws = warp(rotate_back(R, long_w), warp_by), warp(rotate_back(R, short_w), warp_by)
+        ref = None if reference_x_w is None else rotate_back(R, reference_x_w)
         cmd = servo_velocity(centre, normal, wl, ws, pattern, goals[goal], dt, reference_x=ref)
         if cmd.converged and goal < len(goals) - 1:
             goal += 1
@@ -100,9 +110,8 @@ def servo_motion(
             return ServoMotion(np.array(qs), poses, None)
         if step == max_steps:
             break
-        qdot = joint_velocities(
-            camera_jacobian(robot, q), np.asarray(cmd.velocity, np.float64), joint_damping
-        )
+        # the robot stands at q since camera_pose(q) above: its pose is T
+        qdot = joint_velocities(camera_jacobian(robot, q, T), cmd.velocity, joint_damping)
         q, clamped = integrate(robot, q, qdot, dt, max_joint_speed)
         qs.append(q)
         limit_hits = limit_hits + 1 if clamped else 0
