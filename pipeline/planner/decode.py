@@ -10,6 +10,8 @@ import torch
 from pipeline.grasping.types import GraspClass
 from pipeline.planner.network import split_output
 
+_CLASSES = tuple(GraspClass)  # GraspClass by output channel (its value)
+
 
 @dataclass
 class GraspPrediction:
@@ -36,18 +38,18 @@ def decode_output(
     cell_px = image_size / grid
     best = probs.argmax(-1)  # (N, N)
     best_p = probs.max(-1)  # (N, N)
-    out = []
-    for jv, ju in zip(*np.nonzero(best_p > threshold)):
-        out.append(
-            GraspPrediction(
-                u=float((ju + offset[jv, ju, 0]) * cell_px),
-                v=float((jv + offset[jv, ju, 1]) * cell_px),
-                grasp_class=GraspClass(int(best[jv, ju])),
-                probability=float(best_p[jv, ju]),
-                class_probs=probs[jv, ju].copy(),
-            )
-        )
-    return out
+    jv, ju = np.nonzero(best_p > threshold)  # row-major cell order
+    # all kept cells at once: the cell index (int64) plus its float32 offset is float64, as it
+    # is for one cell's numpy scalars
+    us = ((ju + offset[jv, ju, 0]) * cell_px).tolist()
+    vs = ((jv + offset[jv, ju, 1]) * cell_px).tolist()
+    classes = [_CLASSES[c] for c in best[jv, ju].tolist()]
+    kept = best_p[jv, ju].tolist()  # float32 → float, exactly
+    cell_probs = probs[jv, ju]  # (K, C), a copy
+    return [
+        GraspPrediction(u, v, c, p, cell_probs[k].copy())
+        for k, (u, v, c, p) in enumerate(zip(us, vs, classes, kept))
+    ]
 
 
 def second_chance(
@@ -60,21 +62,17 @@ def second_chance(
     ``preds``: ``decode_output`` at ``fallback_threshold`` or lower (each cell's
     ``class_probs`` are read; a cell below ``fallback_threshold`` in every class gives
     nothing). The closed loop's fallback tier (``Planner.plan``), not the paper."""
-    out = []
-    for p in preds:
-        if p.grasp_class != GraspClass.NG and p.probability > threshold:
-            continue  # Eq. 3 keeps it
-        probs = np.asarray(p.class_probs, np.float64).copy()
-        probs[int(GraspClass.NG)] = -np.inf
-        best = int(probs.argmax())
-        if probs[best] > fallback_threshold:
-            out.append(
-                GraspPrediction(
-                    u=p.u,
-                    v=p.v,
-                    grasp_class=GraspClass(best),
-                    probability=float(probs[best]),
-                    class_probs=p.class_probs,
-                )
-            )
-    return out
+    rest = [p for p in preds if not (p.grasp_class != GraspClass.NG and p.probability > threshold)]
+    if not rest:  # Eq. 3 keeps every cell
+        return []
+    probs = np.stack([np.asarray(p.class_probs) for p in rest]).astype(np.float64)  # (K, C)
+    probs[:, int(GraspClass.NG)] = -np.inf
+    best = probs.argmax(axis=1)  # the most probable class other than NG, the first of equals
+    best_p = probs[np.arange(len(rest)), best]
+    return [
+        GraspPrediction(
+            u=p.u, v=p.v, grasp_class=GraspClass(c), probability=q, class_probs=p.class_probs
+        )
+        for p, c, q in zip(rest, best.tolist(), best_p.tolist())
+        if q > fallback_threshold
+    ]

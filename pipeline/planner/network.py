@@ -117,6 +117,26 @@ class ConvBlock(nn.Module):
         return self.act(self.bn(self.conv(x)))
 
 
+class MaxPool2x2(nn.MaxPool2d):
+    """2 × 2 max-pool, stride 2: ``nn.MaxPool2d(2, 2)``. Without autograd on the CPU (planning,
+    evaluation), the elementwise maximum of the image's rows taken in pairs, then of its columns:
+    the same values (a maximum is exact, and NaN propagates through both), without the index of
+    each maximum that ``max_pool2d`` also finds for a backward pass and the branch per element
+    that finding it takes, which made pooling a sizeable part of a narrow network's forward pass
+    on one thread (``make bench ARGS="--only planners"``). With autograd,
+    ``max_pool2d``: its gradient goes to one element of a tied window, where
+    ``torch.maximum``'s would be split between them."""
+
+    def __init__(self) -> None:
+        super().__init__(2, 2)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if torch.is_grad_enabled() or x.device.type != "cpu" or x.shape[-1] % 2 or x.shape[-2] % 2:
+            return super().forward(x)
+        rows = torch.maximum(x[..., 0::2, :], x[..., 1::2, :])
+        return torch.maximum(rows[..., 0::2], rows[..., 1::2])
+
+
 class GraspNet(nn.Module):
     """Depth image (B, 1, S, S) → raw grid output (B, 2 + num_classes, S/32, S/32)."""
 
@@ -145,7 +165,7 @@ class GraspNet(nn.Module):
         layers = []
         for item in spec:
             if item == "M":
-                layers.append(nn.MaxPool2d(2, 2))
+                layers.append(MaxPool2x2())
                 level += 1
             else:
                 c_out, kernel = item

@@ -48,4 +48,6 @@ def normalise_depth(depth_m: np.ndarray, norm: Normalisation) -> np.ndarray:
     """(..., H, W) float32 depth, metres (0 = no data) → float32 network input, same shape."""
     depth_m = np.asarray(depth_m, np.float32)
     x = (depth_m - np.float32(norm.d_ground)) / np.float32(norm.depth_scale)
-    return np.where(depth_m > 0, x, np.float32(norm.missing_depth_value)).astype(np.float32)
+    return np.where(depth_m > 0, x, np.float32(norm.missing_depth_value)).astype(
+        np.float32, copy=False
+    )

@@ -34,7 +34,7 @@ import torch
 
 from pipeline.camera.depth_filter import preprocess_depth
 from pipeline.camera.depth_input import check_depth_image
-from pipeline.camera.geometry import Intrinsics, ground_distance
+from pipeline.camera.geometry import Intrinsics, backproject, ground_distance
 from pipeline.config.build import from_section
 from pipeline.grasping.types import GraspClass
 from pipeline.planner.decode import decode_output, second_chance
@@ -281,7 +281,7 @@ class Planner:
         floor = float(fallback_threshold) if second else th
         preds = decode_output(raw, threshold=floor, image_size=self.size)
         # A (pathological) non-finite offset has no pixel: drop it before rounding.
-        preds = [p for p in preds if np.isfinite(p.u) and np.isfinite(p.v)]
+        preds = [p for p in preds if math.isfinite(p.u) and math.isfinite(p.v)]
         first = [p for p in preds if p.probability > th and p.grasp_class != GraspClass.NG]
         tiers = [(first, self.ranking)]
         if second:
@@ -294,12 +294,13 @@ class Planner:
         if not any(preds for preds, _ in tiers):
             self.last_reason = NO_PREDICTION
             return []
-        ranked = [
-            dataclasses.replace(c, second_tier=tier > 0)
-            for tier, (preds, ranking) in enumerate(tiers)
-            for c in rank_grasps(preds, depth_m, intrinsics, ranking)
-            if _has_data(depth_m, c.u, c.v)
-        ]
+        points = backproject(depth_m, intrinsics)  # once for both tiers
+        ranked = []
+        for tier, (preds, ranking) in enumerate(tiers):
+            for c in rank_grasps(preds, depth_m, intrinsics, ranking, points):
+                if _has_data(depth_m, c.u, c.v):
+                    c.second_tier = tier > 0  # a new candidate of rank_grasps: set in place
+                    ranked.append(c)
         if not ranked:
             self.last_reason = NO_RANKABLE_CANDIDATE
         return ranked
@@ -308,7 +309,7 @@ class Planner:
 def _has_data(depth_m: np.ndarray, u: float, v: float) -> bool:
     """Whether the pixel nearest (u, v) (as ``rank_grasps`` picks it) has depth data."""
     H, W = depth_m.shape
-    return bool(depth_m[int(np.clip(round(v), 0, H - 1)), int(np.clip(round(u), 0, W - 1))] > 0)
+    return bool(depth_m[min(max(round(v), 0), H - 1), min(max(round(u), 0), W - 1)] > 0)
 
 
 def ranking_config(cfg, threshold: float) -> RankingConfig:

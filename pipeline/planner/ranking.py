@@ -121,10 +121,71 @@ def surface_normal(
     return -mean if mean @ ray > 0 else mean  # towards the camera
 
 
+def surface_normals(
+    points_cam: np.ndarray,
+    us: Sequence[int],
+    vs: Sequence[int],
+    half_window: int,
+    max_depth_jump: float,
+) -> list[np.ndarray | None]:
+    """``surface_normal`` at each pixel (us[i], vs[i]), the same values: the windows that lie
+    inside the image's one-pixel border are computed together (the same float64 operations per
+    pixel, the window's unit normals summed in the same row-major order), those that reach the
+    border one by one."""
+    H, W, _ = points_cam.shape
+    h = half_window
+    us, vs = np.asarray(us, np.intp).reshape(-1), np.asarray(vs, np.intp).reshape(-1)
+    out: list[np.ndarray | None] = [None] * len(us)
+    inside = (vs - h >= 1) & (vs + h <= H - 2) & (us - h >= 1) & (us + h <= W - 2)
+    for i in np.flatnonzero(~inside):
+        out[i] = surface_normal(points_cam, int(us[i]), int(vs[i]), h, max_depth_jump)
+    idx = np.flatnonzero(inside)
+    if len(idx) == 0:
+        return out
+    # (K, 2h + 3, 2h + 3, 3): each window plus the one-pixel ring its central differences read
+    ring = np.arange(-h - 1, h + 2)
+    rows, cols = vs[idx, None] + ring, us[idx, None] + ring
+    P = points_cam[rows[:, :, None], cols[:, None, :]].astype(np.float64)
+    centre = P[:, 1:-1, 1:-1]
+    left, right = P[:, 1:-1, :-2], P[:, 1:-1, 2:]
+    up, down = P[:, :-2, 1:-1], P[:, 2:, 1:-1]
+    n = np.cross(right - left, down - up)  # (K, w, w, 3), Eq. 14: away from the camera
+    z = [a[..., 2] for a in (centre, left, right, up, down)]
+    valid = np.all([zi > 0 for zi in z], axis=0)
+    for zi in z[1:]:
+        valid &= np.abs(zi - z[0]) <= max_depth_jump
+    length = np.linalg.norm(n, axis=-1)
+    valid &= length > 0
+    # −0.0 where a pixel is not used: x + (−0.0) = x for every x, signed zeros included, so the
+    # sum is that of the used pixels alone, in the same order
+    unit = np.full(n.shape, -0.0)
+    np.divide(n, length[..., None], out=unit, where=valid[..., None])
+    k, w = len(idx), 2 * h + 1
+    total = unit.reshape(k, w * w, 3).sum(axis=1)
+    count = valid.reshape(k, w * w).sum(axis=1)
+    means = np.divide(total, count[:, None], out=np.zeros_like(total), where=count[:, None] > 0)
+    first = valid.reshape(k, w * w).argmax(axis=1)  # the first used pixel, row-major
+    centres = centre.reshape(k, w * w, 3)
+    rays = points_cam[vs[idx], us[idx]]  # (K, 3) float32
+    for j, i in enumerate(idx):
+        if count[j] == 0:
+            continue
+        # np.linalg.norm of a vector is sqrt(mean · mean) (a BLAS dot): the same dot here
+        sq = means[j].dot(means[j])
+        if sq == 0:
+            continue
+        mean = means[j] / math.sqrt(sq)
+        ray = rays[j] if rays[j, 2] > 0 else centres[j, first[j]]
+        out[i] = -mean if mean @ ray > 0 else mean  # towards the camera
+    return out
+
+
 def inclination(normal_cam: np.ndarray) -> float:
     """φ of Eq. 8 (rad) for a normal pointing towards the camera: the angle between −n and +Z."""
     n = np.asarray(normal_cam, np.float64)
-    return float(np.arccos(np.clip(-n[2] / np.linalg.norm(n), -1.0, 1.0)))
+    # np.linalg.norm(n) of a vector is sqrt(n · n); both square roots are correctly rounded
+    cos = -n[2] / math.sqrt(n.dot(n))
+    return float(np.arccos(min(max(cos, -1.0), 1.0)))  # np.clip's value, without its overhead
 
 
 def graspability(
@@ -141,6 +202,7 @@ def rank_grasps(
     depth_m: np.ndarray,
     intrinsics: Intrinsics,
     cfg: RankingConfig,
+    points_cam: np.ndarray | None = None,
 ) -> list[GraspCandidate]:
     """Score and sort one image's predictions; G_opt is the first candidate.
 
@@ -150,27 +212,35 @@ def rank_grasps(
         predictions: ``decode.decode_output`` output (any threshold).
         depth_m: (H, W) float32 z-depth, metres, 0 = no data.
         intrinsics: of ``depth_m``.
+        points_cam: ``backproject(depth_m, intrinsics)`` when the caller has it already
+            (``Planner.plan`` ranks two tiers on one image); None: computed here.
 
     Returns:
         candidates sorted by J descending (ties: higher probability first).
     """
     depth_m = np.asarray(depth_m, np.float32)
-    points = backproject(depth_m, intrinsics)  # (H, W, 3) camera frame
+    if points_cam is None:
+        points_cam = backproject(depth_m, intrinsics)  # (H, W, 3) camera frame
     H, W = depth_m.shape
     h = cfg.normal_half_window
-    out = []
+    kept = []  # (prediction, u, v, depth I(g)) of those with a depth
     for pred in predictions:
         if pred.probability <= cfg.threshold or pred.grasp_class == GraspClass.NG:
             continue
-        u = int(np.clip(round(pred.u), 0, W - 1))
-        v = int(np.clip(round(pred.v), 0, H - 1))
+        u = min(max(round(pred.u), 0), W - 1)  # the pixel nearest g
+        v = min(max(round(pred.v), 0), H - 1)
         depth = float(depth_m[v, u])
         if depth <= 0:
             window = depth_m[max(v - h, 0) : v + h + 1, max(u - h, 0) : u + h + 1]
             if not (window > 0).any():
                 continue
             depth = float(np.median(window[window > 0]))
-        normal = surface_normal(points, u, v, h, cfg.max_depth_jump)
+        kept.append((pred, u, v, depth))
+    normals = surface_normals(
+        points_cam, [k[1] for k in kept], [k[2] for k in kept], h, cfg.max_depth_jump
+    )
+    out = []
+    for (pred, _, _, depth), normal in zip(kept, normals):
         if normal is None:
             continue
         phi = inclination(normal)

@@ -16,13 +16,18 @@ def planning_times(cfg, num_images: int = 8, repeats: int = 3) -> dict[str, floa
     network: the trained planner of ``models/train/latest`` when it exists (so the number of
     ranked candidates is real), otherwise an untrained one of the same width.
     For the ``paper`` network (width 1.0): network + decoding + ranking, untrained weights.
+
+    On 1 thread, ``Planner.plan`` is timed beside the reference path it replaced
+    (``planning_reference``), interleaved image by image in the same run, with their ratio and
+    whether they gave the same candidates (1.0: every field of every candidate, in the same
+    order); and so again for the ``default`` network with every cell a candidate (the
+    untrained network with its class logits' bias at 0: every probability near 0.5, above th),
+    the most decoding and ranking a plan can take.
     """
     import torch
 
     from pipeline.artifacts.fingerprint import REPO_ROOT
-    from pipeline.planner.network import GraspNet, network_config
-    from pipeline.planner.normalisation import Normalisation
-    from pipeline.planner.planner import Planner, fallback_threshold, ranking_config
+    from pipeline.planner.planner import Planner, fallback_threshold
     from pipeline.runtime.cli import compose
 
     torch.set_num_threads(2)
@@ -35,14 +40,16 @@ def planning_times(cfg, num_images: int = 8, repeats: int = 3) -> dict[str, floa
         if name == "default" and trained.is_file():
             planner, label = Planner.load(trained.parent), "trained"
         else:
-            net = GraspNet(network_config(full))
-            rk = ranking_config(full, min(full.train.threshold_grid))
-            planner = Planner(net, Normalisation(rk.d_ground, 0.1, 0.5), rk)
-            label = "untrained"
-        # the default network also on one thread: the paper's planning-time comparison point
+            planner, label = untrained_planner(full), "untrained"
         floor = fallback_threshold(full, planner.ranking.threshold)
         for threads in (2, 1) if name == "default" else (2,):
             torch.set_num_threads(threads)
+            if threads == 1:  # the default network on one thread: the paper's comparison point
+                out.update(
+                    compare_plans(planner, scenes, intr, floor, repeats, "plan_default_1thread")
+                )
+                _print_comparison(out, "plan_default_1thread", full.model.width, label)
+                continue
             planner.plan(scenes[0].depth_m, intr, fallback_threshold=floor)  # warm-up
             times, counts = [], []
             for _ in range(1 if name == "paper" else repeats):
@@ -50,21 +57,93 @@ def planning_times(cfg, num_images: int = 8, repeats: int = 3) -> dict[str, floa
                     t0 = time.perf_counter()
                     counts.append(len(planner.plan(sc.depth_m, intr, fallback_threshold=floor)))
                     times.append(time.perf_counter() - t0)
-            key = f"plan_{name}" + ("" if threads == 2 else f"_{threads}thread")
+            key = f"plan_{name}"
             out[f"{key}_ms"] = 1000 * float(np.median(times))
             out[f"{key}_candidates"] = float(np.mean(counts))
-            target = (
-                " (target <= 34 ms: the paper's, on a GTX 1080)"
-                if name == "default" and threads == 1
-                else ""
-            )
             print(
                 f"planning, {name} network (width {full.model.width}, {label}), {threads} "
-                f"thread{'s' if threads > 1 else ''}: {out[f'{key}_ms']:.1f} ms/image, "
-                f"{np.mean(counts):.1f} candidates ranked{target}"
+                f"threads: {out[f'{key}_ms']:.1f} ms/image, "
+                f"{np.mean(counts):.1f} candidates ranked"
             )
+        if name == "default":  # every cell a candidate, on one thread
+            torch.set_num_threads(1)
+            busy = untrained_planner(full)
+            with torch.no_grad():
+                busy.net.out.bias[2:] = 0.0
+            key = "plan_every_cell_1thread"
+            out.update(compare_plans(busy, scenes, intr, floor, repeats, key))
+            _print_comparison(out, key, full.model.width, "untrained, every cell a candidate")
         torch.set_num_threads(2)
     return out
+
+
+def untrained_planner(full):
+    """A planner with an untrained network of ``full``'s width (``torch.manual_seed(0)``), the
+    depth normalisation of training and the ranking config at the smallest th of
+    ``train.threshold_grid``."""
+    import torch
+
+    from pipeline.planner.network import GraspNet, network_config
+    from pipeline.planner.normalisation import Normalisation
+    from pipeline.planner.planner import Planner, ranking_config
+
+    torch.manual_seed(0)
+    net = GraspNet(network_config(full))
+    rk = ranking_config(full, min(full.train.threshold_grid))
+    return Planner(net, Normalisation(rk.d_ground, 0.1, 0.5), rk)
+
+
+def compare_plans(planner, scenes, intr, floor, repeats: int, key: str) -> dict[str, float]:
+    """``planner.plan`` and the reference path on the same planner (``planning_reference``),
+    interleaved image by image on the current torch threads: ``{key}_ms`` (``Planner.plan``'s
+    median ms per image), ``{key}_reference_ms``, ``{key}_ratio`` (the first / the second),
+    ``{key}_candidates`` (mean per image) and ``{key}_same_candidates`` (1.0 when every plan
+    gave the same candidates, every field, in the same order; else 0.0)."""
+    import dataclasses
+
+    from pipeline.tools.bench.planning_reference import ReferencePlanner
+
+    reference = ReferencePlanner(planner)
+    paths = {"": planner.plan, "_reference": reference.plan}
+    for plan in paths.values():  # warm-up
+        plan(scenes[0].depth_m, intr, fallback_threshold=floor)
+    times: dict[str, list[float]] = {k: [] for k in paths}
+    counts, same = [], True
+    for _ in range(repeats):
+        for sc in scenes:
+            got = {}
+            for k, plan in paths.items():
+                t0 = time.perf_counter()
+                got[k] = plan(sc.depth_m, intr, fallback_threshold=floor)
+                times[k].append(time.perf_counter() - t0)
+            counts.append(len(got[""]))
+            a, b = ([dataclasses.astuple(c) for c in got[k]] for k in paths)
+            same &= len(a) == len(b) and all(
+                all(_same(x, y) for x, y in zip(ca, cb)) for ca, cb in zip(a, b)
+            )
+    out = {f"{key}{k}_ms": 1000 * float(np.median(t)) for k, t in times.items()}
+    out[f"{key}_ratio"] = out[f"{key}_ms"] / out[f"{key}_reference_ms"]
+    out[f"{key}_candidates"] = float(np.mean(counts))
+    out[f"{key}_same_candidates"] = float(same)
+    return out
+
+
+def _same(x, y) -> bool:
+    """The same value, bit for bit for arrays (dtype too), by ``==`` and type otherwise."""
+    if isinstance(x, np.ndarray):
+        return isinstance(y, np.ndarray) and x.dtype == y.dtype and x.tobytes() == y.tobytes()
+    return type(x) is type(y) and x == y
+
+
+def _print_comparison(out: dict[str, float], key: str, width: float, label: str) -> None:
+    target = " (target <= 34 ms: the paper's, on a GTX 1080)" if "default" in key else ""
+    print(
+        f"planning, default network (width {width}, {label}), 1 thread: "
+        f"{out[f'{key}_ms']:.1f} ms/image{target}, reference path "
+        f"{out[f'{key}_reference_ms']:.1f} ms/image (same run), ratio "
+        f"{out[f'{key}_ratio']:.2f}; {out[f'{key}_candidates']:.1f} candidates ranked, "
+        f"same candidates as the reference: {'yes' if out[f'{key}_same_candidates'] else 'NO'}"
+    )
 
 
 def dexnet_figures(cfg, num_images: int = 6) -> dict[str, float]:
