@@ -182,6 +182,13 @@ def pick_device(requested: str = "auto") -> torch.device:
 class Planner:
     """A trained network plus decoding (Eq. 3) and ranking (Eqs. 7–10)."""
 
+    # The parts ``plan`` runs after the network: one image's raw output → its cells above a
+    # threshold; the second tier's predictions; one tier's candidates, scored and sorted. (The
+    # bench's reference planner puts its own implementations here.)
+    decode_cells = staticmethod(decode_output)  # (raw, threshold, image_size)
+    fallback_tier = staticmethod(second_chance)  # (predictions, threshold, fallback_threshold)
+    rank_tier = staticmethod(rank_grasps)  # (predictions, depth_m, intrinsics, cfg, points_cam)
+
     def __init__(
         self,
         net: GraspNet,
@@ -279,7 +286,7 @@ class Planner:
         th = self.ranking.threshold
         second = fallback_threshold is not None and float(fallback_threshold) < th
         floor = float(fallback_threshold) if second else th
-        preds = decode_output(raw, threshold=floor, image_size=self.size)
+        preds = self.decode_cells(raw, floor, self.size)
         # A (pathological) non-finite offset has no pixel: drop it before rounding.
         preds = [p for p in preds if math.isfinite(p.u) and math.isfinite(p.v)]
         first = [p for p in preds if p.probability > th and p.grasp_class != GraspClass.NG]
@@ -287,7 +294,7 @@ class Planner:
         if second:
             tiers.append(
                 (
-                    second_chance(preds, th, floor),
+                    self.fallback_tier(preds, th, floor),
                     dataclasses.replace(self.ranking, threshold=floor),
                 )
             )
@@ -297,7 +304,7 @@ class Planner:
         points = backproject(depth_m, intrinsics)  # once for both tiers
         ranked = []
         for tier, (preds, ranking) in enumerate(tiers):
-            for c in rank_grasps(preds, depth_m, intrinsics, ranking, points):
+            for c in self.rank_tier(preds, depth_m, intrinsics, ranking, points):
                 if _has_data(depth_m, c.u, c.v):
                     c.second_tier = tier > 0  # a new candidate of rank_grasps: set in place
                     ranked.append(c)

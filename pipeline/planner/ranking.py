@@ -83,6 +83,28 @@ class GraspCandidate:
     second_tier: bool = False  # the closed loop's fallback tier (``Planner.plan``), not Eq. 3's
 
 
+def window_normals(
+    P: np.ndarray, max_depth_jump: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The pixels of windows ``P`` (..., h + 2, w + 2, 3) float64 (camera frame, metres; each
+    window with the one-pixel ring its central differences read) → their points (..., h, w, 3),
+    the central-difference normals n = (right − left) × (down − up) (..., h, w, 3; Eq. 14: away
+    from the camera), their lengths (..., h, w) and which pixels are used (..., h, w): the pixel
+    and its four neighbours have depth, none differs from the pixel by more than
+    ``max_depth_jump`` (m), and n is not zero."""
+    centre = P[..., 1:-1, 1:-1, :]
+    left, right = P[..., 1:-1, :-2, :], P[..., 1:-1, 2:, :]
+    up, down = P[..., :-2, 1:-1, :], P[..., 2:, 1:-1, :]
+    n = np.cross(right - left, down - up)
+    z = [a[..., 2] for a in (centre, left, right, up, down)]
+    valid = np.all([zi > 0 for zi in z], axis=0)
+    for zi in z[1:]:
+        valid &= np.abs(zi - z[0]) <= max_depth_jump
+    length = np.linalg.norm(n, axis=-1)
+    valid &= length > 0
+    return centre, n, length, valid
+
+
 def surface_normal(
     points_cam: np.ndarray, u: int, v: int, half_window: int, max_depth_jump: float
 ) -> np.ndarray | None:
@@ -100,16 +122,7 @@ def surface_normal(
     if v0 > v1 or u0 > u1:
         return None
     P = points_cam[v0 - 1 : v1 + 2, u0 - 1 : u1 + 2].astype(np.float64)  # (h+2, w+2, 3)
-    centre = P[1:-1, 1:-1]
-    left, right = P[1:-1, :-2], P[1:-1, 2:]
-    up, down = P[:-2, 1:-1], P[2:, 1:-1]
-    n = np.cross(right - left, down - up)  # (h, w, 3), Eq. 14: away from the camera
-    z = [a[..., 2] for a in (centre, left, right, up, down)]
-    valid = np.all([zi > 0 for zi in z], axis=0)
-    for zi in z[1:]:
-        valid &= np.abs(zi - z[0]) <= max_depth_jump
-    length = np.linalg.norm(n, axis=-1)
-    valid &= length > 0
+    centre, n, length, valid = window_normals(P, max_depth_jump)
     if not valid.any():
         return None
     mean = (n[valid] / length[valid, None]).mean(0)
@@ -146,16 +159,7 @@ def surface_normals(
     ring = np.arange(-h - 1, h + 2)
     rows, cols = vs[idx, None] + ring, us[idx, None] + ring
     P = points_cam[rows[:, :, None], cols[:, None, :]].astype(np.float64)
-    centre = P[:, 1:-1, 1:-1]
-    left, right = P[:, 1:-1, :-2], P[:, 1:-1, 2:]
-    up, down = P[:, :-2, 1:-1], P[:, 2:, 1:-1]
-    n = np.cross(right - left, down - up)  # (K, w, w, 3), Eq. 14: away from the camera
-    z = [a[..., 2] for a in (centre, left, right, up, down)]
-    valid = np.all([zi > 0 for zi in z], axis=0)
-    for zi in z[1:]:
-        valid &= np.abs(zi - z[0]) <= max_depth_jump
-    length = np.linalg.norm(n, axis=-1)
-    valid &= length > 0
+    centre, n, length, valid = window_normals(P, max_depth_jump)  # (K, w, w, ...)
     # −0.0 where a pixel is not used: x + (−0.0) = x for every x, signed zeros included, so the
     # sum is that of the used pixels alone, in the same order
     unit = np.full(n.shape, -0.0)
@@ -197,6 +201,19 @@ def graspability(
     return (j_distance if phi < phi_switch else j_inclination), j_distance, j_inclination
 
 
+def depth_at(depth_m: np.ndarray, u: int, v: int, half_window: int) -> float | None:
+    """I(g) at pixel (u, v) of ``depth_m`` (H, W) (m, 0 = no data): its depth, else the median
+    of the data in the window of ``half_window`` pixels around it; None where it has none."""
+    depth = float(depth_m[v, u])
+    if depth > 0:
+        return depth
+    h = half_window
+    window = depth_m[max(v - h, 0) : v + h + 1, max(u - h, 0) : u + h + 1]
+    if not (window > 0).any():
+        return None
+    return float(np.median(window[window > 0]))
+
+
 def rank_grasps(
     predictions: Sequence[GraspPrediction],
     depth_m: np.ndarray,
@@ -229,13 +246,9 @@ def rank_grasps(
             continue
         u = min(max(round(pred.u), 0), W - 1)  # the pixel nearest g
         v = min(max(round(pred.v), 0), H - 1)
-        depth = float(depth_m[v, u])
-        if depth <= 0:
-            window = depth_m[max(v - h, 0) : v + h + 1, max(u - h, 0) : u + h + 1]
-            if not (window > 0).any():
-                continue
-            depth = float(np.median(window[window > 0]))
-        kept.append((pred, u, v, depth))
+        depth = depth_at(depth_m, u, v, h)
+        if depth is not None:
+            kept.append((pred, u, v, depth))
     normals = surface_normals(
         points_cam, [k[1] for k in kept], [k[2] for k in kept], h, cfg.max_depth_jump
     )
@@ -243,23 +256,29 @@ def rank_grasps(
     for (pred, _, _, depth), normal in zip(kept, normals):
         if normal is None:
             continue
-        phi = inclination(normal)
-        score, j_distance, j_inclination = graspability(depth, phi, cfg.d_ground, cfg.phi_switch)
-        out.append(
-            GraspCandidate(
-                u=float(pred.u),
-                v=float(pred.v),
-                grasp_class=GraspClass(pred.grasp_class),
-                probability=float(pred.probability),
-                score=score,
-                phi=phi,
-                depth=depth,
-                normal_cam=normal.astype(np.float32),
-                j_distance=j_distance,
-                j_inclination=j_inclination,
-            )
-        )
+        out.append(grasp_candidate(pred, depth, normal, inclination(normal), cfg))
     return order_candidates(out, cfg)
+
+
+def grasp_candidate(
+    pred: GraspPrediction, depth: float, normal: np.ndarray, phi: float, cfg: RankingConfig
+) -> GraspCandidate:
+    """The candidate of prediction ``pred`` at depth I(g) ``depth`` (m) with the unit
+    ``normal`` (3,) (camera frame, towards the camera) of inclination ``phi`` (rad, Eq. 8),
+    scored by Eqs. 7, 9 and 10."""
+    score, j_distance, j_inclination = graspability(depth, phi, cfg.d_ground, cfg.phi_switch)
+    return GraspCandidate(
+        u=float(pred.u),
+        v=float(pred.v),
+        grasp_class=GraspClass(pred.grasp_class),
+        probability=float(pred.probability),
+        score=score,
+        phi=phi,
+        depth=depth,
+        normal_cam=normal.astype(np.float32),
+        j_distance=j_distance,
+        j_inclination=j_inclination,
+    )
 
 
 def order_candidates(cands: Sequence[GraspCandidate], cfg: RankingConfig) -> list[GraspCandidate]:

@@ -59,14 +59,7 @@ from pipeline.artifacts.jsonfile import json_safe, write_json
 from pipeline.artifacts.pointers import keep_latest
 from pipeline.artifacts.stages import compared_pair
 from pipeline.artifacts.store import StageRun
-from pipeline.runtime.cli import (
-    compose,
-    conf_file,
-    data_root,
-    run_named_stage,
-    scale_overrides,
-    stage_command,
-)
+from pipeline.runtime import cli
 from pipeline.runtime.stage_artifacts import run_stage_from_config
 from pipeline.tracking import StageLog
 
@@ -94,7 +87,7 @@ def build(base: list[str], uc, data: Path, models: Path) -> dict[str, Path]:
             f"unseen.test_scenes={uc.test_scenes}: the unseen-size test split "
             "needs at least one heap"
         )
-    boxes_file = conf_file("boxes", uc.boxes)
+    boxes_file = cli.conf_file("boxes", uc.boxes)
     if not boxes_file.is_file():
         choices = sorted(p.stem for p in boxes_file.parent.glob("*.yaml"))
         raise ValueError(
@@ -105,7 +98,7 @@ def build(base: list[str], uc, data: Path, models: Path) -> dict[str, Path]:
             f"unseen.closed_loop_trials={uc.closed_loop_trials}: give a number of "
             "trials, or 0 for no closed loop"
         )
-    loop_file = conf_file("eval_boxes", uc.closed_loop_boxes)
+    loop_file = cli.conf_file("eval_boxes", uc.closed_loop_boxes)
     if int(uc.closed_loop_trials) > 0 and not loop_file.is_file():
         choices = sorted(p.stem for p in loop_file.parent.glob("*.yaml"))
         raise ValueError(
@@ -118,7 +111,7 @@ def build(base: list[str], uc, data: Path, models: Path) -> dict[str, Path]:
     dirs = compared_pair(data, models, uc.train_version, uc.baseline_version, STAGE)
 
     def run(key: str, stage: str, extra: list[str]) -> Path:
-        dirs[key] = run_named_stage(stage, base + extra, f"{STAGE}: {key}")
+        dirs[key] = cli.run_named_stage(stage, base + extra, f"{STAGE}: {key}")
         return dirs[key]
 
     # The unseen heaps, which must not become ``latest``.
@@ -175,8 +168,8 @@ def unseen_tables(cfg, dirs: dict[str, Path], progress: bool) -> tuple[list, lis
     from pipeline.planner.planner import Planner
     from pipeline.planner.scoring import table1
 
-    base = scale_overrides(cfg, None)
-    radius_t1 = float(compose("train", base).train.match_radius_px)
+    base = cli.scale_overrides(cfg, None)
+    radius_t1 = float(cli.compose("train", base).train.match_radius_px)
     planner = Planner.load(dirs["train"])
     data = GraspDataset(
         dirs["generate_unseen"],
@@ -188,7 +181,7 @@ def unseen_tables(cfg, dirs: dict[str, Path], progress: bool) -> tuple[list, lis
     seen_t1 = load_manifest(dirs["train"])["metrics"]["table1"]
     t1 = [table1_row("seen", seen_t1), table1_row("unseen", table1(planner, data, radius_t1))]
 
-    bcfg = compose("baseline", base)
+    bcfg = cli.compose("baseline", base)
     radius = float(bcfg.baseline.table2_radius_px)
     res = evaluate_table2(bcfg, dirs["generate_unseen"], dirs["baseline"], dirs["train"], progress)
     seen_rows = load_manifest(dirs["baseline"])["metrics"]["table2"]["rows"]
@@ -234,8 +227,8 @@ def unseen(cfg: DictConfig, overrides: list[str] | None = None) -> Path:
     """Run the unseen-size study; returns its artifact folder. ``overrides``: passed to every
     stage it runs (the command line's own, by default none)."""
     uc = cfg.unseen
-    base = scale_overrides(cfg, overrides)
-    dirs = build(base, uc, data_root(cfg), Path(cfg.paths.models))
+    base = cli.scale_overrides(cfg, overrides)
+    dirs = build(base, uc, cli.data_root(cfg), Path(cfg.paths.models))
     upstream = {k: v.name for k, v in sorted(dirs.items())}
     config = stage_config(cfg, SECTIONS, NOT_AFFECTING_RESULT)
 
@@ -243,7 +236,7 @@ def unseen(cfg: DictConfig, overrides: list[str] | None = None) -> Path:
         t1, t2, picks = unseen_tables(cfg, dirs, bool(cfg.logging.progress))
         write_rows(run.work_dir / "table1.csv", t1)
         write_rows(run.work_dir / "table2.csv", t2)
-        boxes = compose("generate", base + [f"boxes={uc.boxes}"]).boxes
+        boxes = cli.compose("generate", base + [f"boxes={uc.boxes}"]).boxes
         loop, drops = closed_loop_rows(dirs.get("evaluate_unseen"))
         if "evaluate_unseen" in dirs:
             write_rows(run.work_dir / "closed_loop.csv", loop, empty_header=("planner",))
@@ -270,7 +263,7 @@ def unseen(cfg: DictConfig, overrides: list[str] | None = None) -> Path:
     return run_stage_from_config(cfg, STAGE, config, upstream, body)
 
 
-main = stage_command("unseen", unseen, study=True)
+main = cli.stage_command("unseen", unseen, study=True)
 
 
 if __name__ == "__main__":

@@ -12,85 +12,25 @@ candidates, and each candidate's surface normal computed on its own
 from __future__ import annotations
 
 import copy
-import dataclasses
 
 import numpy as np
 import torch
 from torch import nn
 
-from pipeline.camera.depth_filter import preprocess_depth
 from pipeline.camera.geometry import Intrinsics, backproject
 from pipeline.grasping.types import GraspClass
 from pipeline.planner.decode import GraspPrediction
 from pipeline.planner.network import split_output
 from pipeline.planner.normalisation import Normalisation
-from pipeline.planner.planner import NO_PREDICTION, NO_RANKABLE_CANDIDATE, NO_VALID_DEPTH, Planner
+from pipeline.planner.planner import Planner
 from pipeline.planner.ranking import (
     GraspCandidate,
     RankingConfig,
-    graspability,
+    depth_at,
+    grasp_candidate,
     order_candidates,
     surface_normal,
 )
-
-
-class ReferencePlanner:
-    """``planner``'s network, normalisation, ranking config and depth filter, planned the
-    reference way. ``plan`` takes and returns what ``Planner.plan`` does; ``last_reason``
-    likewise."""
-
-    def __init__(self, planner: Planner) -> None:
-        self.planner = planner
-        self.net = copy.deepcopy(planner.net).eval()
-        for module in self.net.modules():  # every 2 x 2 pool back to nn.MaxPool2d
-            for name, child in module.named_children():
-                if isinstance(child, nn.MaxPool2d):
-                    setattr(module, name, nn.MaxPool2d(child.kernel_size, child.stride))
-        self.last_reason = ""
-
-    @torch.no_grad()
-    def predict(self, depth_m: np.ndarray) -> torch.Tensor:
-        p = self.planner
-        depth_m = p._check(depth_m)
-        batch = depth_m.reshape(-1, 1, p.size, p.size)
-        x = torch.from_numpy(normalise_depth(batch, p.norm)).to(p.device)
-        return self.net(x).float().cpu()
-
-    def plan(
-        self, depth_m: np.ndarray, intrinsics: Intrinsics, fallback_threshold: float | None = None
-    ) -> list[GraspCandidate]:
-        p = self.planner
-        depth_m = preprocess_depth(p._check(depth_m, batch=False), p.depth_filter)
-        if (intrinsics.height, intrinsics.width) != depth_m.shape:
-            raise ValueError("intrinsics and depth image differ in size")
-        self.last_reason = ""
-        if not (depth_m > 0).any():
-            self.last_reason = NO_VALID_DEPTH
-            return []
-        raw = self.predict(depth_m)[0]
-        th = p.ranking.threshold
-        second = fallback_threshold is not None and float(fallback_threshold) < th
-        floor = float(fallback_threshold) if second else th
-        preds = decode_output(raw, threshold=floor, image_size=p.size)
-        preds = [q for q in preds if np.isfinite(q.u) and np.isfinite(q.v)]
-        first = [q for q in preds if q.probability > th and q.grasp_class != GraspClass.NG]
-        tiers = [(first, p.ranking)]
-        if second:
-            tiers.append(
-                (second_chance(preds, th, floor), dataclasses.replace(p.ranking, threshold=floor))
-            )
-        if not any(preds for preds, _ in tiers):
-            self.last_reason = NO_PREDICTION
-            return []
-        ranked = [
-            dataclasses.replace(c, second_tier=tier > 0)
-            for tier, (preds, ranking) in enumerate(tiers)
-            for c in rank_grasps(preds, depth_m, intrinsics, ranking)
-            if _has_data(depth_m, c.u, c.v)
-        ]
-        if not ranked:
-            self.last_reason = NO_RANKABLE_CANDIDATE
-        return ranked
 
 
 def decode_output(
@@ -159,8 +99,10 @@ def rank_grasps(
     depth_m: np.ndarray,
     intrinsics: Intrinsics,
     cfg: RankingConfig,
+    points_cam: np.ndarray | None = None,
 ) -> list[GraspCandidate]:
-    """``pipeline.planner.ranking.rank_grasps``, one candidate at a time."""
+    """``pipeline.planner.ranking.rank_grasps``, one candidate at a time (``points_cam`` is
+    not used: it back-projects the image itself)."""
     depth_m = np.asarray(depth_m, np.float32)
     points = backproject(depth_m, intrinsics)
     H, W = depth_m.shape
@@ -171,34 +113,43 @@ def rank_grasps(
             continue
         u = int(np.clip(round(pred.u), 0, W - 1))
         v = int(np.clip(round(pred.v), 0, H - 1))
-        depth = float(depth_m[v, u])
-        if depth <= 0:
-            window = depth_m[max(v - h, 0) : v + h + 1, max(u - h, 0) : u + h + 1]
-            if not (window > 0).any():
-                continue
-            depth = float(np.median(window[window > 0]))
-        normal = surface_normal(points, u, v, h, cfg.max_depth_jump)
+        depth = depth_at(depth_m, u, v, h)
+        normal = None if depth is None else surface_normal(points, u, v, h, cfg.max_depth_jump)
         if normal is None:
             continue
-        phi = inclination(normal)
-        score, j_distance, j_inclination = graspability(depth, phi, cfg.d_ground, cfg.phi_switch)
-        out.append(
-            GraspCandidate(
-                u=float(pred.u),
-                v=float(pred.v),
-                grasp_class=GraspClass(pred.grasp_class),
-                probability=float(pred.probability),
-                score=score,
-                phi=phi,
-                depth=depth,
-                normal_cam=normal.astype(np.float32),
-                j_distance=j_distance,
-                j_inclination=j_inclination,
-            )
-        )
+        out.append(grasp_candidate(pred, depth, normal, inclination(normal), cfg))
     return order_candidates(out, cfg)
 
 
 def _has_data(depth_m: np.ndarray, u: float, v: float) -> bool:
     H, W = depth_m.shape
     return bool(depth_m[int(np.clip(round(v), 0, H - 1)), int(np.clip(round(u), 0, W - 1))] > 0)
+
+
+class ReferencePlanner(Planner):
+    """``planner``'s network, normalisation, ranking config and depth filter, planned by
+    ``Planner.plan``'s steps with the reference parts: the network with ``nn.MaxPool2d``, the
+    normalisation with its copy, decoding and the second tier one cell at a time, ranking one
+    candidate at a time (``rank_grasps`` below). ``plan`` takes and returns what
+    ``Planner.plan`` does; ``last_reason`` likewise."""
+
+    def __init__(self, planner: Planner) -> None:
+        self.__dict__.update(planner.__dict__)
+        self.net = copy.deepcopy(planner.net).eval()
+        for module in self.net.modules():  # every 2 x 2 pool back to nn.MaxPool2d
+            for name, child in module.named_children():
+                if isinstance(child, nn.MaxPool2d):
+                    setattr(module, name, nn.MaxPool2d(child.kernel_size, child.stride))
+        self.last_reason = ""
+
+    @torch.no_grad()
+    def predict(self, depth_m: np.ndarray) -> torch.Tensor:
+        depth_m = self._check(depth_m)
+        batch = depth_m.reshape(-1, 1, self.size, self.size)
+        x = torch.from_numpy(normalise_depth(batch, self.norm)).to(self.device)
+        return self.net(x).float().cpu()
+
+    # the reference parts, in the places ``Planner.plan`` calls its parts from
+    decode_cells = staticmethod(decode_output)
+    fallback_tier = staticmethod(second_chance)
+    rank_tier = staticmethod(rank_grasps)
