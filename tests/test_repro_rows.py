@@ -32,3 +32,22 @@ def test_same_rows_other_chunks_are_equal_and_other_values_are_not(tmp_path):
     _record(tmp_path / "c.rrd", pause=False, last=6.0)
     assert rrd_rows_equal(tmp_path / "a.rrd", tmp_path / "b.rrd")
     assert not rrd_rows_equal(tmp_path / "a.rrd", tmp_path / "c.rrd")
+
+
+def _timed(path, seconds: float) -> None:
+    rec = rr.RecordingStream("t", recording_id="x", send_properties=False)
+    rec.set_log_time_enabled(False)
+    rec.save(str(path))
+    rec.set_time("d", duration=seconds)
+    rec.set_time("w", timestamp=1_700_000_000.0 + seconds)
+    rec.log("a", rr.Scalars(1.0))
+    rec.disconnect()
+
+
+def test_nanosecond_duration_and_timestamp_timelines_are_compared(tmp_path):
+    # 1.5 µs past a whole second: not a whole microsecond, which Python's timedelta cannot hold
+    _timed(tmp_path / "a.rrd", 2.0000015)
+    _timed(tmp_path / "b.rrd", 2.0000015)
+    _timed(tmp_path / "c.rrd", 2.0000025)
+    assert rrd_rows_equal(tmp_path / "a.rrd", tmp_path / "b.rrd")
+    assert not rrd_rows_equal(tmp_path / "a.rrd", tmp_path / "c.rrd")

@@ -43,7 +43,7 @@ def rrd_rows(path: Path) -> list[str]:
     for chunk in RrdReader(str(path)).stream():
         batch = chunk.to_record_batch()
         names = [n for n in batch.schema.names if "RowId" not in n]
-        cols = {n: batch.column(batch.schema.get_field_index(n)).to_pylist() for n in names}
+        cols = {n: _plain(batch.column(batch.schema.get_field_index(n))) for n in names}
         for k in range(batch.num_rows):
             row = json.dumps(
                 [chunk.entity_path, chunk.is_static, {n: cols[n][k] for n in names}],
@@ -52,6 +52,16 @@ def rrd_rows(path: Path) -> list[str]:
             )
             rows.append(hashlib.sha256(row.encode()).hexdigest())
     return sorted(rows)
+
+
+def _plain(column) -> list:
+    """A record batch column as Python values; durations and timestamps (a recording's duration
+    and time-stamp timelines, in nanoseconds) as integer nanoseconds, which need no pandas."""
+    import pyarrow as pa
+
+    if pa.types.is_duration(column.type) or pa.types.is_timestamp(column.type):
+        column = column.cast(pa.int64())
+    return column.to_pylist()
 
 
 def rrd_rows_equal(a: Path, b: Path) -> bool:
