@@ -71,7 +71,8 @@ def planning_times(cfg, num_images: int = 8, repeats: int = 3) -> dict[str, floa
             with torch.no_grad():
                 busy.net.out.bias[2:] = 0.0
             key = "plan_every_cell_1thread"
-            out.update(compare_plans(busy, scenes, intr, floor, repeats, key))
+            busy_floor = fallback_threshold(full, busy.ranking.threshold)
+            out.update(compare_plans(busy, scenes, intr, busy_floor, repeats, key))
             _print_comparison(out, key, full.model.width, "untrained, every cell a candidate")
         torch.set_num_threads(2)
     return out
