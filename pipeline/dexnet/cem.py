@@ -9,6 +9,7 @@ pixel the contact point, depth and approach axis are read from the image
 from __future__ import annotations
 
 import contextlib
+import functools
 import math
 import warnings
 from collections.abc import Callable
@@ -97,7 +98,12 @@ class CEMResult:
 # most of a plan's time.
 # One thread changes no result (tests/test_dexnet_speed.py checks whole plans against None).
 GMM_THREADS: int | None = 1
-_CONTROLLER: list[ThreadpoolController] = []  # built on first use (it inspects the libraries)
+
+
+@functools.cache
+def _controller() -> ThreadpoolController:
+    """The process's thread-pool controller, built on first use (it inspects the libraries)."""
+    return ThreadpoolController()
 
 
 def _thread_limit():
@@ -105,9 +111,7 @@ def _thread_limit():
     the previous settings come back on exit."""
     if GMM_THREADS is None:
         return contextlib.nullcontext()
-    if not _CONTROLLER:
-        _CONTROLLER.append(ThreadpoolController())
-    return _CONTROLLER[0].limit(limits=GMM_THREADS)
+    return _controller().limit(limits=GMM_THREADS)
 
 
 def _score(score_fn: Callable[[Candidates], np.ndarray], cands: Candidates) -> np.ndarray:
