@@ -3,8 +3,11 @@
 The project's simulated world is made of cuboids only: the bin's floor and walls and the boxes
 of the heap (the robot is never in the camera's view when it renders). For such a world the
 z-depth of a pixel is the entry distance of its ray into the nearest box, which the slab test
-gives exactly, pixel by pixel, in a few numpy operations per box. Each box is tested only over
-its projected footprint: the bounding rectangle of its eight corners in the image.
+gives exactly, pixel by pixel. Each box is tested only over its projected footprint: the
+bounding rectangle of its eight corners in the image. The box is set up here in numpy; the loop
+over its footprint's pixels is compiled (``pipeline.camera.raycast_kernels``: the operations of
+the numpy path kept in ``pipeline/tools/bench/render_reference.py``, with the same result bit
+for bit).
 
 Conventions (the same as ``pipeline.camera.render``'s TinyRenderer path):
     - Rays pass through OpenCV pixel centres: pixel (u, v) looks along the camera-frame
@@ -26,6 +29,7 @@ import numpy as np
 import pybullet as p
 
 from pipeline.camera.geometry import Intrinsics, pose_matrix
+from pipeline.camera.raycast_kernels import ground_into, slab_box_into
 
 
 @dataclass(frozen=True)
@@ -171,35 +175,32 @@ def raycast_boxes(
     ids = np.full((H, W), -1, np.int32)
     T_cam_world = np.linalg.inv(T_world_cam)
     R_cw, t_cw = T_cam_world[:3, :3], T_cam_world[:3, 3]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        for box in boxes:
-            R_cb = R_cw @ box.T_world_box[:3, :3]
-            c = R_cw @ box.T_world_box[:3, 3] + t_cw
-            fp = _footprint(R_cb, c, box.half_extents, intr, near, far)
-            if fp is None:
-                continue
-            u0, u1, v0, v1 = fp
-            xn, yn = grid.xn[None, u0:u1], grid.yn[v0:v1, None]
-            o = -(R_cb.T @ c)
-            t_in = t_out = None
-            for i in range(3):
-                # d_i = a·xn + b·yn + k; the per-pixel arithmetic in float32 (3× faster; its
-                # rounding, ~1e-7 m, is far below the depth's own float32 resolution)
-                a, b, k = f32(R_cb[0, i]), f32(R_cb[1, i]), f32(R_cb[2, i])
-                inv = f32(1.0) / (a * xn + (b * yn + k))
-                m = f32(-o[i]) * inv
-                w = f32(box.half_extents[i]) * np.abs(inv)
-                lo, hi = m - w, m + w
-                if t_in is None:
-                    t_in, t_out = lo, hi
-                else:
-                    # fmax/fmin: a ray parallel to a slab on its boundary gives 0/0 = nan
-                    t_in, t_out = np.fmax(t_in, lo), np.fmin(t_out, hi)
-            t_seen = np.where(t_in >= f32(near), t_in, t_out)
-            block = depth[v0:v1, u0:u1]
-            hit = (t_in <= t_out) & (t_seen >= f32(near)) & (t_seen <= f32(far)) & (t_seen < block)
-            np.copyto(block, t_seen, where=hit)  # (masks are coherent: copyto beats indexing)
-            np.copyto(ids[v0:v1, u0:u1], box.body_id, where=hit)
+    for box in boxes:
+        R_cb = R_cw @ box.T_world_box[:3, :3]
+        c = R_cw @ box.T_world_box[:3, 3] + t_cw
+        fp = _footprint(R_cb, c, box.half_extents, intr, near, far)
+        if fp is None:
+            continue
+        u0, u1, v0, v1 = fp
+        # d_i = a·xn + b·yn + k; the per-pixel arithmetic in float32 (3× faster; its rounding,
+        # ~1e-7 m, is far below the depth's own float32 resolution); the loop over the
+        # footprint's pixels is compiled (raycast_kernels.slab_box_into)
+        slab_box_into(
+            depth,
+            ids,
+            grid.xn,
+            grid.yn,
+            u0,
+            u1,
+            v0,
+            v1,
+            R_cb.T.astype(f32),  # row i: (a, b, k) of axis i
+            (R_cb.T @ c).astype(f32),  # −o
+            np.asarray(box.half_extents, f32),
+            f32(near),
+            f32(far),
+            box.body_id,
+        )
     np.copyto(depth, f32(far), where=ids < 0)
     return depth, ids
 
@@ -222,9 +223,15 @@ def fill_ground(
     """
     grid = ray_grid(intr)
     R, t = T_world_cam[:3, :3], T_world_cam[:3, 3]
-    dz = R[2, 0] * grid.xn64[None, :] + (R[2, 1] * grid.yn64[:, None] + R[2, 2])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        z = (ground_z - t[2]) / dz
-    hit = (body_ids < 0) & (z > 0) & (z < far)
-    np.copyto(depth, z, where=hit, casting="same_kind")
-    np.copyto(body_ids, ground_id, where=hit)
+    ground_into(
+        depth,
+        body_ids,
+        grid.xn64,
+        grid.yn64,
+        float(R[2, 0]),
+        float(R[2, 1]),
+        float(R[2, 2]),
+        float(ground_z - t[2]),
+        int(ground_id),
+        float(far),
+    )

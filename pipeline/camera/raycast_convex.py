@@ -32,6 +32,7 @@ from scipy.spatial import ConvexHull
 
 from pipeline.camera.geometry import Intrinsics, pose_matrix
 from pipeline.camera.raycast import UnsupportedGeometry, all_bodies, ray_grid
+from pipeline.camera.raycast_kernels import half_spaces_into
 
 
 @dataclass(frozen=True)
@@ -155,23 +156,9 @@ def raycast_convex(
                 v0, v1 = max(0, int(np.ceil(v.min()))), min(H, int(np.floor(v.max())) + 1)
                 if u0 >= u1 or v0 >= v1:
                     continue
-            xn, yn = grid.xn64[None, u0:u1], grid.yn64[v0:v1, None]
-            shape_hw = (v1 - v0, u1 - u0)
-            t_in = np.full(shape_hw, -np.inf)
-            t_out = np.full(shape_hw, np.inf)
-            denom, t = np.empty(shape_hw), np.empty(shape_hw)
-            for (a, b, k), d in zip(n_c, d_c):
-                np.add(a * xn, b * yn + k, out=denom)  # n_f . r per pixel
-                np.divide(d, denom, out=t)
-                np.fmax(t_in, t, out=t_in, where=denom < 0.0)  # entering: a lower bound
-                np.fmin(t_out, t, out=t_out, where=denom > 0.0)  # leaving: an upper bound
-                if d < 0.0:  # a ray parallel to this plane and outside it is never inside
-                    t_out[denom == 0.0] = -np.inf
-            t_seen = np.where(t_in >= near, t_in, t_out)
-            block = depth[v0:v1, u0:u1]
-            hit = (t_in <= t_out) & (t_seen >= near) & (t_seen <= far) & (t_seen < block)
-            np.copyto(block, t_seen, where=hit)
-            np.copyto(ids[v0:v1, u0:u1], shape.body_id, where=hit)
+            half_spaces_into(
+                depth, ids, grid.xn64, grid.yn64, u0, u1, v0, v1, n_c, d_c, near, far, shape.body_id
+            )  # the loop over the footprint's pixels and the planes, compiled
     depth[ids < 0] = far
     return depth.astype(np.float32), ids
 

@@ -15,6 +15,7 @@ import cv2
 import numpy as np
 
 from pipeline.grasping.surfaces import fit_plane
+from pipeline.servo.region_kernels import on_plane_mask, slab_counts
 
 if TYPE_CHECKING:
     from pipeline.servo.descriptor import DescriptorConfig
@@ -191,7 +192,7 @@ def tracked_plane(
     n = n if n @ seed_point < 0 else -n  # towards the camera, as fit_plane's
     tol = hypothesis_tolerance(seed_point, cfg)
     d = win @ n
-    counts = (np.abs(d[None, :] - d[:, None]) < tol).sum(axis=1)  # (N,) per candidate offset
+    counts = slab_counts(d, tol)  # (N,) per candidate offset: the points within tol of it
     if expected_point is not None and cfg.track_offset_m is not None:
         tracked = float(n @ np.asarray(expected_point, np.float64))
         near = np.abs(d - tracked) < float(cfg.track_offset_m)
@@ -321,9 +322,10 @@ class PlaneCrop:
         H, W = Z.shape
         v0, v1, u0, u1 = window.v0, window.v1, window.u0, window.u1
         nx, ny, nz = (np.float32(a) for a in n_hat)
-        dist = Z * ((nx * xn)[None, :] + (ny * yn + nz)[:, None])  # n̂ · P
-        dist += np.float32(d_hat)
-        on_plane = window.valid & (np.abs(dist) < np.float32(cfg.eps_distance))  # Eq. 12
+        # Eq. 12 over the image: Z > 0 (window.valid) and |n̂ · P + D̂| < ε1 (compiled loop)
+        on_plane = on_plane_mask(
+            Z, xn, yn, nx, ny, nz, np.float32(d_hat), np.float32(cfg.eps_distance)
+        )
         # Flood fill (mask only) from the window's Eq. 12 pixels, one fill per component.
         image = on_plane.view(np.uint8)
         filled = np.zeros((H + 2, W + 2), dtype=np.uint8)

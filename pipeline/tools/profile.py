@@ -41,7 +41,7 @@ PARTS: tuple[tuple[str, str], ...] = (
     ("forward", r"torch/nn/|torch/_ops|torch/functional"),
     ("optimiser", r"torch/optim/"),
     ("data loading", r"pipeline/planner/(data|augment|targets|normalisation)\.py|torch/utils/data"),
-    ("rendering", r"pipeline/camera/(render|raycast|raycast_convex)\.py"),
+    ("rendering", r"pipeline/camera/(render|raycast|raycast_convex|raycast_kernels)\.py"),
     ("sensor model", r"pipeline/camera/(sensor|randomise|depth_filter)\.py"),
     ("servo", r"pipeline/servo/"),
     ("robot checks (IK, collisions)", r"pipeline/robot/|pipeline/labelling/grasp_check\.py"),

@@ -10,7 +10,12 @@ import tempfile
 from pipeline.runtime.cli import compose
 from pipeline.tools.bench.common import BENCH_SEED
 from pipeline.tools.bench.executors import executor_figures
-from pipeline.tools.bench.planning import closed_loop_figures, dexnet_figures, planning_times
+from pipeline.tools.bench.planning import (
+    closed_loop_figures,
+    compiled_loop_figures,
+    dexnet_figures,
+    planning_times,
+)
 from pipeline.tools.bench.simulation import (
     bare_loop,
     render_figures,
@@ -88,6 +93,7 @@ def main(argv: list[str] | None = None) -> int:
             results.update(dexnet_figures(cfg))
         else:
             results.update(closed_loop_figures())
+            results.update(compiled_loop_figures())
         print(json.dumps({k: round(v, 3) for k, v in results.items()}))
         return 0
     results.update(_stage_and_training_figures(cfg, args.scenes))

@@ -3,6 +3,7 @@ loop."""
 
 from __future__ import annotations
 
+import contextlib
 import time
 
 import numpy as np
@@ -234,7 +235,11 @@ def dexnet_figures(cfg, num_images: int = 6) -> dict[str, float]:
 
 
 def closed_loop_figures(
-    cfg_name: str = "evaluate", renderer: str | None = None, descriptor: bool = True, boxes: int = 3
+    cfg_name: str = "evaluate",
+    renderer: str | None = None,
+    descriptor: bool = True,
+    boxes: int = 3,
+    quiet: bool = False,
 ) -> dict[str, float]:
     """Closed loop: the descriptor's time per 416 x 416 frame, and one trial of ``boxes`` driven by
     the training-free Dex-Net-style planarity planner (no artifact needed): control-loop rate
@@ -292,6 +297,9 @@ def closed_loop_figures(
     out[f"control_loop_hz{sfx}"] = 1.0 / float(np.median(steps)) if steps else float("nan")
     out[f"sim_s_per_wall_s{sfx}"] = result.sim_s / wall
     out[f"trial_{boxes}_boxes_wall_s{sfx}"] = wall
+    if quiet:
+        out["sim_s"] = result.sim_s
+        return out
     parts = {
         "render": "render_s",
         "descriptor": "descriptor_s",
@@ -312,5 +320,62 @@ def closed_loop_figures(
     print(
         f"  control step {1000 * float(np.median(steps)) if steps else float('nan'):.1f} ms "
         "(median): " + ", ".join(f"{k} {v:.1f} ms" for k, v in ms.items())
+    )
+    return out
+
+
+@contextlib.contextmanager
+def numpy_loops():
+    """The closed loop with the numpy paths in place of the compiled loops: the ray cast and the
+    ground (``render_reference``) and the descriptor's Eq. 12 mask and slab counts (the numpy
+    expressions ``pipeline/servo/region_kernels.py`` documents). Same results, bit for bit
+    (``tests/test_raycast_kernels.py``, ``tests/test_region_kernels.py``)."""
+    from unittest import mock
+
+    import numpy as np
+
+    from pipeline.tools.bench import render_reference
+
+    def on_plane(Z, xn, yn, nx, ny, nz, d_hat, eps):
+        dist = Z * ((nx * xn)[None, :] + (ny * yn + nz)[:, None])
+        dist += d_hat
+        return (Z > 0) & (np.abs(dist) < eps)
+
+    def counts(d, tol):
+        return (np.abs(d[None, :] - d[:, None]) < tol).sum(axis=1)
+
+    with (
+        mock.patch("pipeline.camera.render.raycast_boxes", render_reference.raycast_boxes),
+        mock.patch("pipeline.camera.render.fill_ground", render_reference.fill_ground),
+        mock.patch("pipeline.servo.region.on_plane_mask", on_plane),
+        mock.patch("pipeline.servo.region.slab_counts", counts),
+    ):
+        yield
+
+
+def compiled_loop_figures(boxes: int = 3, repeats: int = 2) -> dict[str, float]:
+    """The closed loop's trial of ``closed_loop_figures`` with the compiled loops and with their
+    numpy paths (``numpy_loops``), alternating, ``repeats`` times each in one run: the best wall
+    time of each, their ratio, and whether every trial took the same simulated time (it must:
+    the loops change no bit)."""
+    walls: dict[str, list[float]] = {"compiled": [], "numpy": []}
+    sims: dict[str, set] = {"compiled": set(), "numpy": set()}
+    for _ in range(repeats):
+        for name in walls:
+            with numpy_loops() if name == "numpy" else contextlib.nullcontext():
+                fig = closed_loop_figures(descriptor=False, boxes=boxes, quiet=True)
+            walls[name].append(fig[f"trial_{boxes}_boxes_wall_s"])
+            sims[name].add(round(fig["sim_s"], 9))
+    out = {f"trial_{boxes}_boxes_wall_s_{k}": min(v) for k, v in walls.items()}
+    out["closed_loop_compiled_speedup"] = (
+        out[f"trial_{boxes}_boxes_wall_s_numpy"] / out[f"trial_{boxes}_boxes_wall_s_compiled"]
+    )
+    same = len(sims["compiled"] | sims["numpy"]) == 1
+    out["closed_loop_compiled_same_trial"] = float(same)
+    print(
+        f"closed loop, compiled loops vs their numpy paths (one {boxes}-box trial, best of "
+        f"{repeats} each, alternating): {out[f'trial_{boxes}_boxes_wall_s_compiled']:.2f} s vs "
+        f"{out[f'trial_{boxes}_boxes_wall_s_numpy']:.2f} s wall, "
+        f"{out['closed_loop_compiled_speedup']:.2f}x; same simulated time: {same}"
     )
     return out
