@@ -360,6 +360,22 @@ def test_box_shapes_read_from_pybullet(client, static_box):
     assert shape.T_world_box[:3, 0] == pytest.approx([0, 1, 0], abs=1e-9)
 
 
+def test_shape_cache_reads_poses_afresh(client, static_box):
+    """With a cache, a body's shapes are read once and its pose every time: after the box
+    moves, the cached read gives the same shapes, bit for bit, as a read without the cache."""
+    body = static_box(client, [0.06, 0.0375, 0.0115], [0.1, -0.05, 0.2])
+    cache: dict = {}
+    boxes_from_pybullet(client, [body], cache)
+    assert set(cache) == {body}
+    q = p.getQuaternionFromEuler([0.3, 0.1, 1.2])
+    p.resetBasePositionAndOrientation(body, [0.02, 0.03, 0.25], q, physicsClientId=client)
+    (cached,) = boxes_from_pybullet(client, [body], cache)
+    (fresh,) = boxes_from_pybullet(client, [body])
+    assert cached.T_world_box.tobytes() == fresh.T_world_box.tobytes()
+    assert cached.half_extents.tobytes() == fresh.half_extents.tobytes()
+    assert cached.T_world_box[:3, 3] == pytest.approx([0.02, 0.03, 0.25])
+
+
 def test_generation_uses_the_configured_renderer():
     """``camera.renderer`` reaches the generation's scenes: the ray-cast scene and the
     TinyRenderer scene of one seed hold the same heap, the same mask but for ties, and depth

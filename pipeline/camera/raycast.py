@@ -59,12 +59,17 @@ def all_bodies(client: int) -> list[int]:
     ]
 
 
-def boxes_from_pybullet(client: int, body_ids=None) -> list[BoxShape]:
+def boxes_from_pybullet(client: int, body_ids=None, cache: dict | None = None) -> list[BoxShape]:
     """The visible box shapes of ``body_ids`` (all bodies of the client when None), posed now.
 
     Shapes drawn fully transparent (alpha 0, as the project's ground slab) are skipped, as the
     rasteriser skips them. Only base links are read: every body of the project's cell is a
     single rigid box.
+
+    ``cache``: a dict the caller keeps for one world whose bodies keep their shapes (the closed
+    loop's cell, emptied when it builds a new world): each body's visible boxes in its own
+    frame are read from pybullet once and kept there, so a frame reads only the bodies' poses.
+    The shapes are the same either way.
 
     Raises:
         UnsupportedGeometry: a listed body has a visible shape that is not a box, or links.
@@ -73,25 +78,34 @@ def boxes_from_pybullet(client: int, body_ids=None) -> list[BoxShape]:
         body_ids = all_bodies(client)
     out = []
     for body in body_ids:
-        shapes = p.getVisualShapeData(body, physicsClientId=client)
-        if not shapes:
+        local = None if cache is None else cache.get(body)
+        if local is None:
+            local = _local_boxes(client, body)
+            if cache is not None:
+                cache[body] = local
+        if not local:
             continue
         pos, quat = p.getBasePositionAndOrientation(body, physicsClientId=client)
-        T_body = None
-        for s in shapes:
-            link, geom, dims, local_pos, local_orn, rgba = s[1], s[2], s[3], s[5], s[6], s[7]
-            if rgba[3] <= 0.0:
-                continue
-            if geom != p.GEOM_BOX or link != -1:
-                raise UnsupportedGeometry(
-                    f"body {body} has a visible {'link' if link != -1 else 'base'} shape of "
-                    f"pybullet geometry type {geom}: the ray-cast renderer draws base boxes "
-                    "only. Leave that body out of `bodies`, or use camera.renderer=tinyrenderer"
-                )
-            if T_body is None:
-                T_body = pose_matrix(pos, quat)
-            T = T_body @ pose_matrix(local_pos, local_orn)
-            out.append(BoxShape(int(body), T, np.asarray(dims, np.float64) / 2.0))
+        T_body = pose_matrix(pos, quat)
+        for T_local, half in local:
+            out.append(BoxShape(int(body), T_body @ T_local, half))
+    return out
+
+
+def _local_boxes(client: int, body: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The visible boxes of ``body``: (4, 4) pose in the body frame and (3,) half extents, m."""
+    out = []
+    for s in p.getVisualShapeData(body, physicsClientId=client):
+        link, geom, dims, local_pos, local_orn, rgba = s[1], s[2], s[3], s[5], s[6], s[7]
+        if rgba[3] <= 0.0:
+            continue
+        if geom != p.GEOM_BOX or link != -1:
+            raise UnsupportedGeometry(
+                f"body {body} has a visible {'link' if link != -1 else 'base'} shape of "
+                f"pybullet geometry type {geom}: the ray-cast renderer draws base boxes "
+                "only. Leave that body out of `bodies`, or use camera.renderer=tinyrenderer"
+            )
+        out.append((pose_matrix(local_pos, local_orn), np.asarray(dims, np.float64) / 2.0))
     return out
 
 

@@ -81,6 +81,7 @@ def render_depth(
     renderer: str,
     ground: tuple[float, int] | None = None,
     bodies: Sequence[int] | None = None,
+    box_cache: dict | None = None,
 ) -> DepthFrame:
     """Render metric depth and body ids of the current pybullet state.
 
@@ -93,6 +94,8 @@ def render_depth(
             images to TinyRenderer but was no faster on a 2-core CPU with Mesa llvmpipe.)
         bodies: ``"raycast"`` only: the bodies to draw (default: every body of the client;
             every visible shape must then be a box). The rasteriser always draws everything.
+        box_cache: ``"raycast"`` only: ``raycast.boxes_from_pybullet``'s cache of the bodies'
+            shapes, for a caller that renders one world many times.
         ground: optional ``(z, body_id)`` of an invisible horizontal ground plane at world height
             ``z``. Pixels that hit nothing get the exact ray/plane depth and ``body_id``. Drawing
             a large ground slab costs TinyRenderer about 40 ms per 416 × 416 frame; this costs
@@ -100,7 +103,7 @@ def render_depth(
     """
     if renderer == "raycast":
         depth, seg = raycast_boxes(
-            boxes_from_pybullet(client, bodies), intr, T_world_cam, near, far
+            boxes_from_pybullet(client, bodies, box_cache), intr, T_world_cam, near, far
         )
     elif renderer == "tinyrenderer":
         _, _, _, depth_buffer, seg = p.getCameraImage(

@@ -55,11 +55,13 @@ class PickCell:
         self.cell_ids: list[int] = []
         self.sensor_rng: np.random.Generator | None = None  # draws of cfg.sensor's model
         self.last_frame: Frame | None = None  # the truth behind the latest observation
+        self.box_shapes: dict = {}  # the ray cast's shapes of this world's bodies (render)
 
     def reset(self, rng: np.random.Generator, count: int) -> None:
         """New world: the cell, ``count`` boxes of ``eval_boxes`` dropped and settled, the robot
         at home."""
         cfg = self.cfg
+        self.box_shapes = {}
         self.cell_ids = build_cell(self.client, cfg.bin, cfg.physics)
         boxes_cfg = _with_count(cfg.eval_boxes, count)
         heap = drop_heap(self.client, rng, boxes_cfg, cfg.bin, cfg.physics)
@@ -94,6 +96,7 @@ class PickCell:
                 ground=ground,
                 renderer="raycast",
                 bodies=self.obstacles,
+                box_cache=self.box_shapes,
             )
         else:
             pos, orn = p.getBasePositionAndOrientation(rid, physicsClientId=cid)
@@ -137,6 +140,7 @@ class PickCell:
     def remove_box(self, body: int) -> None:
         p.removeBody(body, physicsClientId=self.client)
         self.boxes.pop(body, None)
+        self.box_shapes.pop(body, None)
 
     def boxes_in_bin(self) -> list[int]:
         """Boxes whose centre is inside the bin's walls (others fell out: removed)."""
