@@ -182,6 +182,7 @@ class BaselineConfig:
     lr: float = MISSING
     weight_decay: float = MISSING
     num_threads: int = MISSING
+    channels_last: bool = MISSING  # the GQ-CNN's training tensors' memory layout
     variants: list[str] = MISSING
     ood: BaselineOODConfig = MISSING  # the gqcnn_ood variant's training heaps (``objects``)
     max_eval_images: int = MISSING  # 0 = the whole test split

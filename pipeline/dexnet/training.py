@@ -71,7 +71,8 @@ def train_gqcnn(
     torch.manual_seed(int(cfg.seed))
     torch.set_num_threads(int(b.num_threads))
     torch.use_deterministic_algorithms(True)
-    net = GQCNN(gqcnn_config(cfg))
+    layout = torch.channels_last if bool(b.channels_last) else torch.contiguous_format
+    net = GQCNN(gqcnn_config(cfg)).to(memory_format=layout)
     opt = torch.optim.Adam(net.parameters(), lr=float(b.lr), weight_decay=float(b.weight_decay))
     crops, poses, labels = train_inputs
     n = len(labels)
@@ -91,7 +92,7 @@ def train_gqcnn(
             leave=False,
         ):
             idx = np.sort(order[start : start + int(b.batch_size)])
-            x = torch.from_numpy(crops[idx].astype(np.float32))
+            x = torch.from_numpy(crops[idx].astype(np.float32)).contiguous(memory_format=layout)
             p = torch.from_numpy(poses[idx])
             y = torch.from_numpy(labels[idx].astype(np.float32))
             loss = torch.nn.functional.binary_cross_entropy_with_logits(net(x, p), y)
@@ -104,4 +105,6 @@ def train_gqcnn(
         history["val"].append(evaluate_gqcnn(net, *val_inputs))
     history["train_s"] = time.perf_counter() - t0
     history["samples_per_s"] = int(b.epochs) * n / max(history["train_s"], 1e-9)
-    return net.eval(), history
+    # the standard layout, as the stored network is loaded (the same weights, so the same
+    # outputs in memory as from disk)
+    return net.to(memory_format=torch.contiguous_format).eval(), history

@@ -153,7 +153,8 @@ def dexnet_figures(cfg, num_images: int = 6) -> dict[str, float]:
     ``data/baseline/latest`` when it exists, else untrained weights of the same size), the same
     with the CEM's mixtures on the BLAS and OpenMP libraries' own thread setting instead of
     ``pipeline.dexnet.cem.GMM_THREADS`` (``_gmm_threads_default_ms``, interleaved with the
-    first, same draws), and the GQ-CNN's training throughput (crops/s, batch 64)."""
+    first, same draws), and the GQ-CNN's training throughput (crops/s, batch 64) in both memory
+    layouts, alternating."""
     import torch
 
     from pipeline.artifacts.fingerprint import REPO_ROOT
@@ -217,20 +218,32 @@ def dexnet_figures(cfg, num_images: int = 6) -> dict[str, float]:
             f"(mixtures on the libraries' own threads: "
             f"{out[f'{key}_gmm_threads_default_ms']:.1f} ms/image)"
         )
-    net = GQCNN(gqcnn_config(full)).train()
-    opt = torch.optim.Adam(net.parameters(), lr=1e-3)
     size = int(full.dexnet.crop.size)
     x, pose = torch.randn(64, 1, size, size), torch.randn(64, 2)
     y = (torch.rand(64) > 0.5).float()
-    times = []
-    for _ in range(6):
-        t0 = time.perf_counter()
-        opt.zero_grad()
-        torch.nn.functional.binary_cross_entropy_with_logits(net(x, pose), y).backward()
-        opt.step()
-        times.append(time.perf_counter() - t0)
-    out["gqcnn_train_crops_per_s"] = 64 / float(np.median(times[1:]))
-    print(f"GQ-CNN training, batch 64: {out['gqcnn_train_crops_per_s']:.0f} crops/s")
+    layouts = {"contiguous": torch.contiguous_format, "channels_last": torch.channels_last}
+    steps, times = {}, {name: [] for name in layouts}
+    for name, layout in layouts.items():
+        torch.manual_seed(0)
+        net = GQCNN(gqcnn_config(full)).train().to(memory_format=layout)
+        opt = torch.optim.Adam(net.parameters(), lr=1e-3)
+        steps[name] = (net, opt, x.contiguous(memory_format=layout))
+    for _ in range(8):  # the layouts alternate; the first step of each is left out
+        for name, (net, opt, xl) in steps.items():
+            t0 = time.perf_counter()
+            opt.zero_grad()
+            torch.nn.functional.binary_cross_entropy_with_logits(net(xl, pose), y).backward()
+            opt.step()
+            times[name].append(time.perf_counter() - t0)
+    for name in layouts:
+        out[f"gqcnn_train_crops_per_s_{name}"] = 64 / float(np.median(times[name][1:]))
+    used = "channels_last" if full.baseline.channels_last else "contiguous"
+    out["gqcnn_train_crops_per_s"] = out[f"gqcnn_train_crops_per_s_{used}"]
+    print(
+        f"GQ-CNN training, batch 64: {out['gqcnn_train_crops_per_s_channels_last']:.0f} crops/s "
+        f"channels-last, {out['gqcnn_train_crops_per_s_contiguous']:.0f} contiguous "
+        f"(baseline.channels_last: {bool(full.baseline.channels_last)})"
+    )
     return out
 
 
