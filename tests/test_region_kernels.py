@@ -1,8 +1,9 @@
 """The descriptor's compiled loops (``pipeline/servo/region_kernels.py``) give the numpy
-expressions they replaced bit for bit: Eq. 12's mask over an image and the tracked plane's slab
-counts, on random inputs with no-data pixels, exact ties and offsets exactly ``tol`` apart, and
-``describe_surface`` as a whole on heap frames from the servo's close-up poses with the numpy
-expressions put back."""
+expressions they replaced bit for bit: Eq. 12's mask over an image, Eqs. 12–14 on a crop
+(without normal smoothing) and the tracked plane's slab counts, on random inputs with no-data
+pixels, exact ties and offsets exactly ``tol`` apart, and ``describe_surface`` as a whole on
+heap frames from the servo's close-up poses with the numpy expressions
+(``pipeline/tools/bench/descriptor_reference.py``) put back."""
 
 from __future__ import annotations
 
@@ -19,23 +20,44 @@ from pipeline.cell.bin import build_cell
 from pipeline.runtime.cli import compose
 from pipeline.servo import region
 from pipeline.servo.descriptor import describe_surface
-from pipeline.servo.region_kernels import on_plane_mask, slab_counts
+from pipeline.servo.region_kernels import on_plane_mask, plane_rules_unsmoothed, slab_counts
 from pipeline.simulation.heap import drop_heap
 from pipeline.simulation.views import closeup_poses
+from pipeline.tools.bench import descriptor_reference as reference
 
 f32 = np.float32
 
 
-def numpy_on_plane(Z, xn, yn, nx, ny, nz, d_hat, eps):
-    """The numpy expression ``on_plane_mask`` replaced (``PlaneCrop.of``)."""
-    dist = Z * ((nx * xn)[None, :] + (ny * yn + nz)[:, None])
-    dist += d_hat
-    return (Z > 0) & (np.abs(dist) < eps)
-
-
-def numpy_counts(d, tol):
-    """The numpy expression ``slab_counts`` replaced (``tracked_plane``)."""
-    return (np.abs(d[None, :] - d[:, None]) < tol).sum(axis=1)
+def test_plane_rules_bit_for_bit():
+    """Crops of a tilted plane with noise, holes and a step, and the degenerate sizes (fewer
+    than 3 rows or columns: no rules)."""
+    rng = np.random.default_rng(5)
+    passed = 0
+    for h, w in ((40, 56), (2, 9), (9, 2), (3, 3)):
+        xn = ((np.arange(w, dtype=f32) - f32(20.5)) / f32(60.0)).astype(f32)
+        yn = ((np.arange(h, dtype=f32) - f32(15.5)) / f32(60.0)).astype(f32)
+        for _ in range(10):
+            n = rng.normal(size=3)
+            n[2] = -abs(n[2]) - 1.0  # towards the camera
+            n /= np.linalg.norm(n)
+            nx, ny, nz = (f32(a) for a in n)
+            d = rng.uniform(0.3, 0.6)
+            # depth of the plane n . P + d = 0 along each ray, plus noise, a step and holes
+            Z = (-d / (nx * xn[None, :] + ny * yn[:, None] + nz)).astype(f32)
+            Z += rng.normal(0.0, 0.001, (h, w)).astype(f32)
+            Z[:, w // 2 :] += f32(0.02) * (rng.random() < 0.5)
+            Z[rng.random((h, w)) < 0.05] = 0.0
+            X, Y = Z * xn[None, :], Z * yn[:, None]
+            valid = Z > 0
+            eps, k = f32(rng.uniform(0.002, 0.01)), f32(1.0 - 0.05 / 2.0)
+            got = plane_rules_unsmoothed(X, Y, Z, valid, xn, yn, nx, ny, nz, f32(d), eps, k)
+            want = reference.plane_rules_unsmoothed(
+                X, Y, Z, valid, xn, yn, nx, ny, nz, f32(d), eps, k
+            )
+            for a, b in zip(got, want):
+                assert a.dtype == b.dtype and np.array_equal(a, b)
+            passed += int(got[1].sum())
+    assert passed > 0  # some pixels pass every rule
 
 
 def test_on_plane_mask_bit_for_bit():
@@ -53,7 +75,7 @@ def test_on_plane_mask_bit_for_bit():
         d_hat = f32(-(nx * xn[10] + ny * yn[20] + nz) * Z[20, 10])
         eps = f32(rng.uniform(0.001, 0.05))
         got = on_plane_mask(Z, xn, yn, nx, ny, nz, d_hat, eps)
-        want = numpy_on_plane(Z, xn, yn, nx, ny, nz, d_hat, eps)
+        want = reference.on_plane_mask(Z, xn, yn, nx, ny, nz, d_hat, eps)
         assert got.dtype == want.dtype and np.array_equal(got, want)
         assert got.any() and not got.all()
 
@@ -64,7 +86,7 @@ def test_slab_counts_bit_for_bit_with_ties_at_tol():
     for n in (1, 10, 441):
         d = rng.normal(0.5, 0.01, n)
         d[: n // 3] = np.round(d[: n // 3] / tol) * tol  # offsets a multiple of tol apart
-        got, want = slab_counts(d, tol), numpy_counts(d, tol)
+        got, want = slab_counts(d, tol), reference.slab_counts(d, tol)
         assert got.dtype == want.dtype and np.array_equal(got, want)
     # by hand: 0 and 0.003 are within 0.004, 0.004 from 0 is not (strict <)
     assert slab_counts(np.array([0.0, 0.003, 0.004, 0.01]), 0.004).tolist() == [2, 3, 2, 1]
@@ -75,8 +97,9 @@ def numpy_region(monkeypatch):
     """``pipeline.servo.region`` with the numpy expressions in place of the compiled loops."""
 
     def put_back():
-        monkeypatch.setattr(region, "on_plane_mask", numpy_on_plane)
-        monkeypatch.setattr(region, "slab_counts", numpy_counts)
+        monkeypatch.setattr(region, "on_plane_mask", reference.on_plane_mask)
+        monkeypatch.setattr(region, "slab_counts", reference.slab_counts)
+        monkeypatch.setattr(region, "plane_rules_unsmoothed", reference.plane_rules_unsmoothed)
 
     return put_back
 

@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 
 from pipeline.grasping.surfaces import fit_plane
-from pipeline.servo.region_kernels import on_plane_mask, slab_counts
+from pipeline.servo.region_kernels import on_plane_mask, plane_rules_unsmoothed, slab_counts
 
 if TYPE_CHECKING:
     from pipeline.servo.descriptor import DescriptorConfig
@@ -52,6 +52,11 @@ def plane_rules(
     """
     h, w = Z.shape
     nx, ny, nz = (np.float32(x) for x in n_hat)
+    k = np.float32(1.0 - cfg.eps_normal / 2.0)
+    if cfg.normal_smoothing <= 0:  # the expressions below, per pixel in one compiled loop
+        return plane_rules_unsmoothed(
+            X, Y, Z, valid, xn, yn, nx, ny, nz, np.float32(d_hat), np.float32(cfg.eps_distance), k
+        )
     dist = X * nx
     dist += Y * ny
     dist += Z * nz
@@ -77,7 +82,6 @@ def plane_rules(
     length2 = cx * cx
     length2 += cy * cy
     length2 += cz * cz
-    k = np.float32(1.0 - cfg.eps_normal / 2.0)
     if cfg.normal_smoothing > 0:
         # Unit n_p towards the camera (0 where undefined), box-averaged, renormalised.
         with np.errstate(divide="ignore", invalid="ignore"):

@@ -55,3 +55,56 @@ def slab_counts(d, tol):
                 c += 1
         counts[i] = c
     return counts
+
+
+@njit(cache=True, nogil=True)
+def plane_rules_unsmoothed(X, Y, Z, valid, xn, yn, nx, ny, nz, d_hat, eps, k):
+    """``pipeline.servo.region.plane_rules`` without normal smoothing: (Eq. 12 mask, Eqs. 12
+    & 13 mask), both (h, w) bool, of a crop; the operations of its numpy expressions per pixel.
+
+    Args:
+        X, Y, Z: (h, w) float32 back-projected coordinates, m (Z = 0 where no data); valid:
+            (h, w) bool. xn: (w,), yn: (h,) float32. nx, ny, nz, d_hat, eps: float32 plane and
+            ε1; k: float32 1 − ε2 / 2.
+    """
+    h, w = Z.shape
+    on_plane = np.empty((h, w), np.bool_)
+    for r in range(h):
+        for c in range(w):
+            dist = X[r, c] * nx
+            dist = dist + Y[r, c] * ny
+            dist = dist + Z[r, c] * nz
+            dist = dist + d_hat
+            on_plane[r, c] = valid[r, c] & (abs(dist) < eps)
+    rules = np.zeros((h, w), np.bool_)
+    if h < 3 or w < 3:
+        return on_plane, rules
+    kk = k * k
+    for r in range(1, h - 1):
+        yi = yn[r]
+        for c in range(1, w - 1):
+            xi = xn[c]
+            du = Z[r, c + 1] - Z[r, c - 1]
+            dv = Z[r + 1, c] - Z[r - 1, c]
+            A = X[r, c + 1] - X[r, c - 1]
+            B = Y[r + 1, c] - Y[r - 1, c]
+            cx = du * (yi * dv - B)
+            cy = dv * (xi * du - A)
+            cz = A * B - (xi * yi) * (du * dv)
+            defined = (
+                valid[r, c] & valid[r, c + 1] & valid[r, c - 1] & valid[r + 1, c] & valid[r - 1, c]
+            )
+            towards = cx * xi
+            towards = towards + cy * yi
+            towards = towards + cz
+            length2 = cx * cx
+            length2 = length2 + cy * cy
+            length2 = length2 + cz * cz
+            dot = cx * nx
+            dot = dot + cy * ny
+            dot = dot + cz * nz
+            if towards > 0:
+                dot = -dot
+            ok = (dot > 0) & (dot * dot > kk * length2)
+            rules[r, c] = ok & defined & on_plane[r, c]
+    return on_plane, rules

@@ -340,28 +340,22 @@ def closed_loop_figures(
 @contextlib.contextmanager
 def numpy_loops():
     """The closed loop with the numpy paths in place of the compiled loops: the ray cast and the
-    ground (``render_reference``) and the descriptor's Eq. 12 mask and slab counts (the numpy
-    expressions ``pipeline/servo/region_kernels.py`` documents). Same results, bit for bit
+    ground (``render_reference``) and the descriptor's Eq. 12 mask, rules and slab counts
+    (``descriptor_reference``). Same results, bit for bit
     (``tests/test_raycast_kernels.py``, ``tests/test_region_kernels.py``)."""
     from unittest import mock
 
-    import numpy as np
-
-    from pipeline.tools.bench import render_reference
-
-    def on_plane(Z, xn, yn, nx, ny, nz, d_hat, eps):
-        dist = Z * ((nx * xn)[None, :] + (ny * yn + nz)[:, None])
-        dist += d_hat
-        return (Z > 0) & (np.abs(dist) < eps)
-
-    def counts(d, tol):
-        return (np.abs(d[None, :] - d[:, None]) < tol).sum(axis=1)
+    from pipeline.tools.bench import descriptor_reference, render_reference
 
     with (
         mock.patch("pipeline.camera.render.raycast_boxes", render_reference.raycast_boxes),
         mock.patch("pipeline.camera.render.fill_ground", render_reference.fill_ground),
-        mock.patch("pipeline.servo.region.on_plane_mask", on_plane),
-        mock.patch("pipeline.servo.region.slab_counts", counts),
+        mock.patch("pipeline.servo.region.on_plane_mask", descriptor_reference.on_plane_mask),
+        mock.patch("pipeline.servo.region.slab_counts", descriptor_reference.slab_counts),
+        mock.patch(
+            "pipeline.servo.region.plane_rules_unsmoothed",
+            descriptor_reference.plane_rules_unsmoothed,
+        ),
     ):
         yield
 
