@@ -160,6 +160,22 @@ def _footprint(
     return u0, u1, v0, v1
 
 
+def posed_boxes(
+    boxes: list[BoxShape], intr: Intrinsics, T_world_cam: np.ndarray, near: float, far: float
+):
+    """Each box of ``boxes`` that can be seen, in the camera frame: yields ``(box, R_cb, c,
+    (u0, u1, v0, v1))``, its axes (3, 3) and centre (3,) in the camera frame (m) and its
+    footprint (``_footprint``). Shared by ``raycast_boxes`` and its numpy path."""
+    T_cam_world = np.linalg.inv(T_world_cam)
+    R_cw, t_cw = T_cam_world[:3, :3], T_cam_world[:3, 3]
+    for box in boxes:
+        R_cb = R_cw @ box.T_world_box[:3, :3]
+        c = R_cw @ box.T_world_box[:3, 3] + t_cw
+        fp = _footprint(R_cb, c, box.half_extents, intr, near, far)
+        if fp is not None:
+            yield box, R_cb, c, fp
+
+
 def raycast_boxes(
     boxes: list[BoxShape], intr: Intrinsics, T_world_cam: np.ndarray, near: float, far: float
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -187,15 +203,7 @@ def raycast_boxes(
     f32 = np.float32
     depth = np.full((H, W), np.inf, np.float32)
     ids = np.full((H, W), -1, np.int32)
-    T_cam_world = np.linalg.inv(T_world_cam)
-    R_cw, t_cw = T_cam_world[:3, :3], T_cam_world[:3, 3]
-    for box in boxes:
-        R_cb = R_cw @ box.T_world_box[:3, :3]
-        c = R_cw @ box.T_world_box[:3, 3] + t_cw
-        fp = _footprint(R_cb, c, box.half_extents, intr, near, far)
-        if fp is None:
-            continue
-        u0, u1, v0, v1 = fp
+    for box, R_cb, c, (u0, u1, v0, v1) in posed_boxes(boxes, intr, T_world_cam, near, far):
         # d_i = a·xn + b·yn + k; the per-pixel arithmetic in float32 (3× faster; its rounding,
         # ~1e-7 m, is far below the depth's own float32 resolution); the loop over the
         # footprint's pixels is compiled (raycast_kernels.slab_box_into)

@@ -123,6 +123,34 @@ def convex_from_pybullet(client: int, body_ids=None) -> list[ConvexShape]:
     return out
 
 
+def posed_solids(
+    shapes: list[ConvexShape], intr: Intrinsics, T_world_cam: np.ndarray, near: float, far: float
+):
+    """Each solid of ``shapes`` that can be seen, in the camera frame: yields ``(shape, n_c,
+    d_c, (u0, u1, v0, v1))``, its planes ``n_c . x_cam <= d_c`` ((F, 3), (F,); m) and the pixel
+    rectangle [u0, u1) × [v0, v1) of its projected vertices (the whole image when a vertex is
+    behind the camera). Shared by ``raycast_convex`` and its numpy path."""
+    H, W = intr.height, intr.width
+    T_cam_world = np.linalg.inv(np.asarray(T_world_cam, np.float64))
+    R_cw, t_cw = T_cam_world[:3, :3], T_cam_world[:3, 3]
+    for shape in shapes:
+        n_c = shape.normals @ R_cw.T  # (F, 3) camera frame
+        d_c = shape.offsets + n_c @ t_cw  # n.(R x + t) form: n_c . x_cam <= d_c
+        pts = shape.vertices @ R_cw.T + t_cw  # (V, 3) camera frame
+        z = pts[:, 2]
+        if z.max() < near or z.min() > far:
+            continue
+        if z.min() <= 1e-9:
+            yield shape, n_c, d_c, (0, W, 0, H)
+            continue
+        u = intr.fx * pts[:, 0] / z + intr.cx
+        v = intr.fy * pts[:, 1] / z + intr.cy
+        u0, u1 = max(0, int(np.ceil(u.min()))), min(W, int(np.floor(u.max())) + 1)
+        v0, v1 = max(0, int(np.ceil(v.min()))), min(H, int(np.floor(v.max())) + 1)
+        if u0 < u1 and v0 < v1:
+            yield shape, n_c, d_c, (u0, u1, v0, v1)
+
+
 def raycast_convex(
     shapes: list[ConvexShape], intr: Intrinsics, T_world_cam: np.ndarray, near: float, far: float
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -137,28 +165,10 @@ def raycast_convex(
     H, W = intr.height, intr.width
     depth = np.full((H, W), np.inf, np.float64)
     ids = np.full((H, W), -1, np.int32)
-    T_cam_world = np.linalg.inv(np.asarray(T_world_cam, np.float64))
-    R_cw, t_cw = T_cam_world[:3, :3], T_cam_world[:3, 3]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        for shape in shapes:
-            n_c = shape.normals @ R_cw.T  # (F, 3) camera frame
-            d_c = shape.offsets + n_c @ t_cw  # n.(R x + t) form: n_c . x_cam <= d_c
-            pts = shape.vertices @ R_cw.T + t_cw  # (V, 3) camera frame
-            z = pts[:, 2]
-            if z.max() < near or z.min() > far:
-                continue
-            if z.min() <= 1e-9:
-                u0, u1, v0, v1 = 0, W, 0, H
-            else:
-                u = intr.fx * pts[:, 0] / z + intr.cx
-                v = intr.fy * pts[:, 1] / z + intr.cy
-                u0, u1 = max(0, int(np.ceil(u.min()))), min(W, int(np.floor(u.max())) + 1)
-                v0, v1 = max(0, int(np.ceil(v.min()))), min(H, int(np.floor(v.max())) + 1)
-                if u0 >= u1 or v0 >= v1:
-                    continue
-            half_spaces_into(
-                depth, ids, grid.xn64, grid.yn64, u0, u1, v0, v1, n_c, d_c, near, far, shape.body_id
-            )  # the loop over the footprint's pixels and the planes, compiled
+    for shape, n_c, d_c, (u0, u1, v0, v1) in posed_solids(shapes, intr, T_world_cam, near, far):
+        half_spaces_into(
+            depth, ids, grid.xn64, grid.yn64, u0, u1, v0, v1, n_c, d_c, near, far, shape.body_id
+        )  # the loop over the footprint's pixels and the planes, compiled
     depth[ids < 0] = far
     return depth.astype(np.float32), ids
 

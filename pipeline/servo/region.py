@@ -53,24 +53,56 @@ def plane_rules(
     h, w = Z.shape
     nx, ny, nz = (np.float32(x) for x in n_hat)
     k = np.float32(1.0 - cfg.eps_normal / 2.0)
-    if cfg.normal_smoothing <= 0:  # the expressions below, per pixel in one compiled loop
+    if cfg.normal_smoothing <= 0:  # eq12_mask, eq14_terms and Eq. 13, per pixel, compiled
         return plane_rules_unsmoothed(
             X, Y, Z, valid, xn, yn, nx, ny, nz, np.float32(d_hat), np.float32(cfg.eps_distance), k
         )
-    dist = X * nx
-    dist += Y * ny
-    dist += Z * nz
-    dist += np.float32(d_hat)
-    on_plane = valid & (np.abs(dist) < np.float32(cfg.eps_distance))  # Eq. 12 (with n̂)
+    on_plane = eq12_mask(
+        X, Y, Z, valid, nx, ny, nz, np.float32(d_hat), np.float32(cfg.eps_distance)
+    )
     rules = np.zeros((h, w), dtype=bool)
     if h < 3 or w < 3:
         return on_plane, rules
+    cx, cy, cz, defined, towards, length2 = eq14_terms(X, Y, Z, valid, xn, yn)
+    # Unit n_p towards the camera (0 where undefined), box-averaged, renormalised.
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = np.where(defined & (length2 > 0), np.float32(1.0) / np.sqrt(length2), np.float32(0.0))
+    inv = np.where(towards > 0, -inv, inv)
+    size = (2 * cfg.normal_smoothing + 1,) * 2
+    mx, my, mz = (cv2.blur(c * inv, size, borderType=cv2.BORDER_CONSTANT) for c in (cx, cy, cz))
+    dot = mx * nx
+    dot += my * ny
+    dot += mz * nz
+    norm2 = mx * mx
+    norm2 += my * my
+    norm2 += mz * mz
+    ok = (dot > 0) & (dot * dot > (k * k) * norm2)
+    rules[1:-1, 1:-1] = ok & defined
+    rules &= on_plane
+    return on_plane, rules
+
+
+def eq12_mask(X, Y, Z, valid, nx, ny, nz, d_hat, eps) -> np.ndarray:
+    """(h, w) bool, Eq. 12 on (h, w) float32 coordinates: ``valid`` and |n̂ · P + D̂| < ε1
+    (float32 scalars ``nx``, ``ny``, ``nz``, ``d_hat``, ``eps``; m)."""
+    dist = X * nx
+    dist += Y * ny
+    dist += Z * nz
+    dist += d_hat
+    return valid & (np.abs(dist) < eps)
+
+
+def eq14_terms(X, Y, Z, valid, xn, yn) -> tuple[np.ndarray, ...]:
+    """Eq. 14 on the (h − 2, w − 2) interior of (h, w) float32 coordinates (h, w ≥ 3), as
+    ``plane_rules`` derives it: the cross product's components ``cx``, ``cy``, ``cz`` (away
+    from the camera for a visible surface), ``defined`` (the pixel and its four neighbours have
+    depth), ``towards`` = (c · P) / Z and ``length2`` = |c|²."""
     xi, yi = xn[None, 1:-1], yn[1:-1, None]
     du = Z[1:-1, 2:] - Z[1:-1, :-2]
     dv = Z[2:, 1:-1] - Z[:-2, 1:-1]
     A = X[1:-1, 2:] - X[1:-1, :-2]
     B = Y[2:, 1:-1] - Y[:-2, 1:-1]
-    cx = du * (yi * dv - B)  # Eq. 14, away from the camera for a visible surface
+    cx = du * (yi * dv - B)
     cy = dv * (xi * du - A)
     cz = A * B - (xi * yi) * (du * dv)
     defined = (
@@ -78,35 +110,11 @@ def plane_rules(
     )
     towards = cx * xi
     towards += cy * yi
-    towards += cz  # (c · P) / Z
+    towards += cz
     length2 = cx * cx
     length2 += cy * cy
     length2 += cz * cz
-    if cfg.normal_smoothing > 0:
-        # Unit n_p towards the camera (0 where undefined), box-averaged, renormalised.
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv = np.where(
-                defined & (length2 > 0), np.float32(1.0) / np.sqrt(length2), np.float32(0.0)
-            )
-        inv = np.where(towards > 0, -inv, inv)
-        size = (2 * cfg.normal_smoothing + 1,) * 2
-        mx, my, mz = (cv2.blur(c * inv, size, borderType=cv2.BORDER_CONSTANT) for c in (cx, cy, cz))
-        dot = mx * nx
-        dot += my * ny
-        dot += mz * nz
-        norm2 = mx * mx
-        norm2 += my * my
-        norm2 += mz * mz
-        ok = (dot > 0) & (dot * dot > (k * k) * norm2)
-    else:
-        dot = cx * nx
-        dot += cy * ny
-        dot += cz * nz
-        dot = np.where(towards > 0, -dot, dot)  # flip n_p towards the camera
-        ok = (dot > 0) & (dot * dot > (k * k) * length2)
-    rules[1:-1, 1:-1] = ok & defined
-    rules &= on_plane
-    return on_plane, rules
+    return cx, cy, cz, defined, towards, length2
 
 
 def window_plane(

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from pipeline.servo.region import eq12_mask, eq14_terms
+
 
 def on_plane_mask(Z, xn, yn, nx, ny, nz, d_hat, eps):
     """The numpy expression ``on_plane_mask`` replaced (``PlaneCrop.of``)."""
@@ -22,33 +24,13 @@ def slab_counts(d, tol):
 
 def plane_rules_unsmoothed(X, Y, Z, valid, xn, yn, nx, ny, nz, d_hat, eps, k):
     """The numpy expressions ``plane_rules_unsmoothed`` replaced (``plane_rules`` without
-    normal smoothing)."""
+    normal smoothing): ``region.eq12_mask``, ``region.eq14_terms``, then Eq. 13."""
     h, w = Z.shape
-    dist = X * nx
-    dist += Y * ny
-    dist += Z * nz
-    dist += d_hat
-    on_plane = valid & (np.abs(dist) < eps)
+    on_plane = eq12_mask(X, Y, Z, valid, nx, ny, nz, d_hat, eps)
     rules = np.zeros((h, w), dtype=bool)
     if h < 3 or w < 3:
         return on_plane, rules
-    xi, yi = xn[None, 1:-1], yn[1:-1, None]
-    du = Z[1:-1, 2:] - Z[1:-1, :-2]
-    dv = Z[2:, 1:-1] - Z[:-2, 1:-1]
-    A = X[1:-1, 2:] - X[1:-1, :-2]
-    B = Y[2:, 1:-1] - Y[:-2, 1:-1]
-    cx = du * (yi * dv - B)
-    cy = dv * (xi * du - A)
-    cz = A * B - (xi * yi) * (du * dv)
-    defined = (
-        valid[1:-1, 1:-1] & valid[1:-1, 2:] & valid[1:-1, :-2] & valid[2:, 1:-1] & valid[:-2, 1:-1]
-    )
-    towards = cx * xi
-    towards += cy * yi
-    towards += cz
-    length2 = cx * cx
-    length2 += cy * cy
-    length2 += cz * cz
+    cx, cy, cz, defined, towards, length2 = eq14_terms(X, Y, Z, valid, xn, yn)
     dot = cx * nx
     dot += cy * ny
     dot += cz * nz

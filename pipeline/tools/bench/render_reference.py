@@ -4,16 +4,17 @@ compiled (``pipeline/camera/raycast_kernels.py``; ``docs/performance.md``, "Rend
 for ``make bench`` (which times both in the same run) and for the tests that check both give the
 same depth and body ids, bit for bit.
 
-Each solid's footprint is computed with whole-footprint numpy arrays, one temporary per
-operation. Same arguments, frames, units and returns as the functions they mirror.
+Each solid is set up as the renderers set it up (``posed_boxes``, ``posed_solids``); its
+footprint is then computed with whole-footprint numpy arrays, one temporary per operation.
+Same arguments, frames, units and returns as the functions they mirror.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from pipeline.camera.raycast import BoxShape, _footprint, ray_grid
-from pipeline.camera.raycast_convex import ConvexShape
+from pipeline.camera.raycast import BoxShape, posed_boxes, ray_grid
+from pipeline.camera.raycast_convex import ConvexShape, posed_solids
 
 
 def raycast_boxes(
@@ -25,16 +26,8 @@ def raycast_boxes(
     f32 = np.float32
     depth = np.full((H, W), np.inf, np.float32)
     ids = np.full((H, W), -1, np.int32)
-    T_cam_world = np.linalg.inv(T_world_cam)
-    R_cw, t_cw = T_cam_world[:3, :3], T_cam_world[:3, 3]
     with np.errstate(divide="ignore", invalid="ignore"):
-        for box in boxes:
-            R_cb = R_cw @ box.T_world_box[:3, :3]
-            c = R_cw @ box.T_world_box[:3, 3] + t_cw
-            fp = _footprint(R_cb, c, box.half_extents, intr, near, far)
-            if fp is None:
-                continue
-            u0, u1, v0, v1 = fp
+        for box, R_cb, c, (u0, u1, v0, v1) in posed_boxes(boxes, intr, T_world_cam, near, far):
             xn, yn = grid.xn[None, u0:u1], grid.yn[v0:v1, None]
             o = -(R_cb.T @ c)
             t_in = t_out = None
@@ -68,25 +61,8 @@ def raycast_convex(
     H, W = intr.height, intr.width
     depth = np.full((H, W), np.inf, np.float64)
     ids = np.full((H, W), -1, np.int32)
-    T_cam_world = np.linalg.inv(np.asarray(T_world_cam, np.float64))
-    R_cw, t_cw = T_cam_world[:3, :3], T_cam_world[:3, 3]
     with np.errstate(divide="ignore", invalid="ignore"):
-        for shape in shapes:
-            n_c = shape.normals @ R_cw.T  # (F, 3) camera frame
-            d_c = shape.offsets + n_c @ t_cw  # n.(R x + t) form: n_c . x_cam <= d_c
-            pts = shape.vertices @ R_cw.T + t_cw  # (V, 3) camera frame
-            z = pts[:, 2]
-            if z.max() < near or z.min() > far:
-                continue
-            if z.min() <= 1e-9:
-                u0, u1, v0, v1 = 0, W, 0, H
-            else:
-                u = intr.fx * pts[:, 0] / z + intr.cx
-                v = intr.fy * pts[:, 1] / z + intr.cy
-                u0, u1 = max(0, int(np.ceil(u.min()))), min(W, int(np.floor(u.max())) + 1)
-                v0, v1 = max(0, int(np.ceil(v.min()))), min(H, int(np.floor(v.max())) + 1)
-                if u0 >= u1 or v0 >= v1:
-                    continue
+        for shape, n_c, d_c, (u0, u1, v0, v1) in posed_solids(shapes, intr, T_world_cam, near, far):
             xn, yn = grid.xn64[None, u0:u1], grid.yn64[v0:v1, None]
             shape_hw = (v1 - v0, u1 - u0)
             t_in = np.full(shape_hw, -np.inf)
