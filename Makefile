@@ -7,6 +7,9 @@ EXPERIMENT ?= default
 ARGS ?=
 STAGE ?= generate
 NPROC ?= 1
+# Test workers (pytest-xdist): one per core, at most 4; each takes whole test files (TEST_WORKERS=0: one process).
+TEST_WORKERS ?= auto
+PYTEST := $(PY) -m pytest -q $(if $(filter 0,$(TEST_WORKERS)),,-n $(TEST_WORKERS) --maxprocesses 4 --dist loadfile)
 RUN := $(PY) -m
 # NPROC > 1: data-parallel training, one process per CPU share or GPU (torchrun + DDP).
 TRAIN := $(if $(filter-out 1,$(NPROC)),.venv/bin/torchrun --standalone --nproc_per_node=$(NPROC) -m,$(RUN)) pipeline.stages.train
@@ -15,7 +18,7 @@ TRAIN := $(if $(filter-out 1,$(NPROC)),.venv/bin/torchrun --standalone --nproc_p
 
 help: ## List the targets
 	@grep -hE '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  make %-12s %s\n", $$1, $$2}'
-	@echo "  Variables: EXPERIMENT=smoke|default|paper (default: default), ARGS='hydra overrides', STAGE=<stage> (view, profile), NPROC=<n> (train)"
+	@echo "  Variables: EXPERIMENT=smoke|default|paper (default: default), ARGS='hydra overrides', STAGE=<stage> (view, profile), NPROC=<n> (train), TEST_WORKERS=<n>|auto|0 (test, test-slow)"
 
 setup: ## Create .venv with the pinned packages and check system libraries (quick if done)
 	@bash scripts/setup.sh
@@ -25,11 +28,11 @@ lint: setup ## Lint and format check (ruff) and the architecture contracts (impo
 	.venv/bin/ruff format --check .
 	.venv/bin/lint-imports --no-cache
 
-test: setup ## Run the fast test suite (what CI runs; the contracts are one of its tests)
-	$(PY) -m pytest -q
+test: setup ## Run the fast test suite on every core (what CI runs; the contracts are one of its tests)
+	$(PYTEST)
 
 test-slow: setup ## Run only the tests marked slow (`make test` runs all the others; CI runs both)
-	$(PY) -m pytest -q -m slow || [ $$? -eq 5 ]  # 5: no test is marked slow
+	$(PYTEST) -m slow || [ $$? -eq 5 ]  # 5: no test is marked slow
 
 reproduce: setup ## Run every stage with EXPERIMENT (default: default), then the report
 	$(RUN) pipeline.stages.generate experiment=$(EXPERIMENT) $(ARGS)
