@@ -4,8 +4,9 @@
   candidates computed for all crops at once, the NaN-holed source image shared across the CEM's
   scoring rounds) against the crop-by-crop implementation it replaced, kept here.
 * The whole plan (every CEM iteration's candidates and scores, the grasp) with the mixtures
-  fitted on one BLAS and OpenMP thread (``cem.GMM_THREADS = 1``) and the shared crop source,
-  against the libraries' own thread setting and the reference crops, on synthetic heaps.
+  fitted on one BLAS and OpenMP thread (``cem.GMM_THREADS = 1``), the shared crop source and
+  the GQ-CNN's pooling by ``MaxPool2x2``'s inference path, against the libraries' own thread
+  setting, the reference crops and ``max_pool2d``, on synthetic heaps.
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from pipeline.dexnet.gqcnn import (
 from pipeline.dexnet.planner import DexNetPlanner, Workspace
 from pipeline.dexnet.quality import PlanarityConfig
 from pipeline.dexnet.sampling import SamplerConfig
+from pipeline.planner.network import MaxPool2x2
 
 FLOOR = 0.625  # camera height above the bin floor (conf/camera/sr300.yaml)
 INTR = Intrinsics(200, 200, 200.0, 200.0, 99.5, 99.5)
@@ -130,6 +132,7 @@ def test_plans_equal_the_plain_path(monkeypatch):
             if name == "plain":
                 m.setattr(cem_mod, "GMM_THREADS", None)
                 m.setattr(planner_mod, "candidate_inputs", _reference_inputs)
+                m.setattr(MaxPool2x2, "forward", torch.nn.MaxPool2d.forward)
             else:
                 assert cem_mod.GMM_THREADS == 1
                 assert planner_mod.candidate_inputs is candidate_inputs

@@ -13,7 +13,8 @@ Input, as in gqcnn's suction networks (Dex-Net 3.0/4.0):
   4.0's suction pose input (depth and the angle between approach axis and optical axis).
   Shape (N, 2) float32.
 
-Network: three conv blocks (conv, ReLU, 2×2 max-pool; a 5×5 then two 3×3 kernels; ``width``,
+Network: three conv blocks (conv, ReLU, 2×2 max-pool, the DCNN's ``MaxPool2x2``, whose
+inference path skips the indices a backward pass needs; a 5×5 then two 3×3 kernels; ``width``,
 2·``width``, 4·``width`` channels), a fully connected layer of ``fc`` units on the flattened
 image features, the pose through its own ``fc // 4`` units, both concatenated into ``fc`` units
 and one output logit: the predicted probability that the suction grasp is robust (robust
@@ -34,6 +35,7 @@ import torch
 from torch import nn
 
 from pipeline.dexnet.sampling import Candidates
+from pipeline.planner.network import MaxPool2x2
 
 
 @dataclass(frozen=True)
@@ -164,7 +166,7 @@ class GQCNN(nn.Module):
             layers += [
                 nn.Conv2d(c_in, c_out, k, padding=k // 2),
                 nn.ReLU(inplace=True),
-                nn.MaxPool2d(2),
+                MaxPool2x2(),
             ]
             c_in = c_out
         self.features = nn.Sequential(*layers)

@@ -152,9 +152,10 @@ def dexnet_figures(cfg, num_images: int = 6) -> dict[str, float]:
     """Dex-Net-style planner: median planning time per image of each variant (the GQ-CNN of
     ``data/baseline/latest`` when it exists, else untrained weights of the same size), the same
     with the CEM's mixtures on the BLAS and OpenMP libraries' own thread setting instead of
-    ``pipeline.dexnet.cem.GMM_THREADS`` (``_gmm_threads_default_ms``, interleaved with the
-    first, same draws), and the GQ-CNN's training throughput (crops/s, batch 64) in both memory
-    layouts, alternating."""
+    ``pipeline.dexnet.cem.GMM_THREADS`` (``_gmm_threads_default_ms``) and the same with the
+    GQ-CNN pooling by ``max_pool2d`` instead of ``MaxPool2x2``'s inference path
+    (``_max_pool2d_ms``), interleaved with the first, same draws; and the GQ-CNN's training
+    throughput (crops/s, batch 64) in both memory layouts, alternating."""
     import torch
 
     from pipeline.artifacts.fingerprint import REPO_ROOT
@@ -169,6 +170,7 @@ def dexnet_figures(cfg, num_images: int = 6) -> dict[str, float]:
         sampler_config,
         workspace,
     )
+    from pipeline.planner.network import MaxPool2x2
     from pipeline.runtime.cli import compose
 
     torch.set_num_threads(2)
@@ -199,24 +201,35 @@ def dexnet_figures(cfg, num_images: int = 6) -> dict[str, float]:
         planner.plan(scenes[0].depth_m, intr)  # warm-up
         # The CEM's mixtures on cem.GMM_THREADS threads (as planned) and, for comparison, on the
         # BLAS and OpenMP libraries' own thread setting: interleaved, same draws.
-        planned = cem.GMM_THREADS
+        # The GQ-CNN's pooling by max_pool2d instead of MaxPool2x2's inference path: the same
+        # values (tests/test_dexnet_speed.py), the path before it.
+        planned, fast_pool = cem.GMM_THREADS, MaxPool2x2.forward
         times: dict[str, list[float]] = {"planned": [], "default": []}
+        if variant == "gqcnn":
+            times["max_pool2d"] = []
         try:
             for k, sc in enumerate(scenes):
                 for name in list(times)[:: 1 if k % 2 == 0 else -1]:
-                    cem.GMM_THREADS = planned if name == "planned" else None
+                    cem.GMM_THREADS = None if name == "default" else planned
+                    MaxPool2x2.forward = (
+                        torch.nn.MaxPool2d.forward if name == "max_pool2d" else fast_pool
+                    )
                     t0 = time.perf_counter()
                     planner.plan(sc.depth_m, intr, rng=np.random.default_rng([BENCH_SEED, 41, k]))
                     times[name].append(time.perf_counter() - t0)
         finally:
-            cem.GMM_THREADS = planned
+            cem.GMM_THREADS, MaxPool2x2.forward = planned, fast_pool
         key = f"plan_dexnet_{variant}"
         out[f"{key}_ms"] = 1000 * float(np.median(times["planned"]))
         out[f"{key}_gmm_threads_default_ms"] = 1000 * float(np.median(times["default"]))
+        pooling = ""
+        if "max_pool2d" in times:
+            out[f"{key}_max_pool2d_ms"] = 1000 * float(np.median(times["max_pool2d"]))
+            pooling = f"; GQ-CNN pooling by max_pool2d: {out[f'{key}_max_pool2d_ms']:.1f} ms/image"
         print(
             f"planning, Dex-Net-style {variant} + CEM ({label}): {out[f'{key}_ms']:.1f} ms/image "
             f"(mixtures on the libraries' own threads: "
-            f"{out[f'{key}_gmm_threads_default_ms']:.1f} ms/image)"
+            f"{out[f'{key}_gmm_threads_default_ms']:.1f} ms/image{pooling})"
         )
     size = int(full.dexnet.crop.size)
     x, pose = torch.randn(64, 1, size, size), torch.randn(64, 2)
