@@ -12,7 +12,9 @@ entry: a user's plug-in planner, ``package.module:Class`` or an entry point name
 picks until the trial ends (``pipeline.world.trial``). The heaps come from the stream of
 ``evaluate.split``: ``dev`` (development, the ablation) or ``test`` (the report's Table 3;
 never used to choose anything); trial t of split s has the heap seed (seed, HEAP_SEEDS[s], t).
-Trials run in parallel processes; the artifact does not depend on the number of workers.
+Trials run in parallel processes; the artifact does not depend on the number of workers. An
+interrupted run resumes: a rerun keeps the trials it finished and runs the others
+(``_finished_trials``; docs/artifacts.md).
 
 The robot decides from its observations alone (``pipeline.controller``): every depth image it
 takes (at home and in every servo step) goes through the ``sensor`` model (default ``ideal``:
@@ -46,6 +48,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -445,27 +448,34 @@ def evaluate(cfg: DictConfig) -> Path:
         tasks = [
             TrialTask(name, t) for name in planners for t in range(int(cfg.evaluate.num_trials))
         ]
+        # an interrupted run's finished trials are kept; the rest are run
+        done = _finished_trials(run, tasks)
+        todo = [i for i in range(len(tasks)) if i not in done]
         t0 = time.perf_counter()
-        out = list(
-            map_shards(
-                run_task,
-                tasks,
-                init=_init_worker,
-                initargs=(
-                    cfg_obj,
-                    str(train_dir) if train_dir else None,
-                    str(baseline_dir) if baseline_dir else None,
-                ),
-                workers=min(workers, len(tasks)),
-                desc=STAGE,
-                progress=bool(cfg_obj.logging.progress),
-                executor=cfg_obj.executor,
-            )
+        trials = map_shards(
+            run_task,
+            [tasks[i] for i in todo],
+            init=_init_worker,
+            initargs=(
+                cfg_obj,
+                str(train_dir) if train_dir else None,
+                str(baseline_dir) if baseline_dir else None,
+            ),
+            workers=min(workers, len(todo)),
+            desc=STAGE,
+            progress=bool(cfg_obj.logging.progress),
+            executor=cfg_obj.executor,
         )
+        for i, pair in zip(todo, trials, strict=True):
+            _keep_trial(run, i, pair)
+            done[i] = pair
         wall = time.perf_counter() - t0
+        out = [done[i] for i in range(len(tasks))]
         results = [r for r, _ in out]
         _write_results(run, cfg, results)
         timings: dict = {"wall_s": round(wall, 2), "workers": workers, "planners": {}}
+        if run.resumed:
+            timings["trials_resumed"] = len(tasks) - len(todo)
         for name in planners:
             timings["planners"][name] = _planner_timings([m for m in out if m[0].planner == name])
         run.timings.update(timings)
@@ -474,7 +484,58 @@ def evaluate(cfg: DictConfig) -> Path:
         with StageLog.for_stage(run.work_dir, STAGE, run.version) as log:
             log_trials(log, results, Intrinsics.from_config(cfg.camera))
 
-    return run_stage_from_config(cfg, STAGE, config, upstream, body)
+    return run_stage_from_config(cfg, STAGE, config, upstream, body, resumable=True)
+
+
+# ------------------------------------------------------------------------------ resuming
+# A finished trial's result and timings, one JSON file per trial in the run's resume folder
+# (``StageRun.state_dir``, never part of the artifact), so that a rerun of an interrupted
+# evaluation runs only the trials it had not finished. A logged trial (the first
+# ``evaluate.log_trials`` of each planner) is not kept: its step-by-step log data is run again.
+TRIALS_DIR = "trials"
+
+
+def _trial_file(run: StageRun, index: int) -> Path:
+    """Where task ``index`` (in the stage's task order) keeps its finished trial."""
+    return run.state_dir / TRIALS_DIR / f"{index:06d}.json"
+
+
+def _keep_trial(run: StageRun, index: int, pair: tuple[TrialResult, dict]) -> None:
+    """Write task ``index``'s finished (result, timings) atomically, unless it is logged."""
+    result, timings = pair
+    if result.has_log_data:
+        return
+    path = _trial_file(run, index)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    part = path.with_suffix(".part")
+    part.write_text(json.dumps({"result": result.to_record(), "timings": timings}))
+    os.replace(part, path)
+
+
+def _finished_trials(run: StageRun, tasks: list[TrialTask]) -> dict[int, tuple]:
+    """The trials an interrupted run of this version finished: {task index: (result,
+    timings)}. Everything else in the work folder is deleted, and so is a trial file that
+    cannot be read or names another trial. Empty unless ``run.resumed``."""
+    if not run.resumed:
+        return {}
+    files = [_trial_file(run, i) for i in range(len(tasks))]
+    run.keep_only(files)
+    done = {}
+    for i, (task, path) in enumerate(zip(tasks, files, strict=True)):
+        if not path.is_file():
+            continue
+        try:
+            record = json.loads(path.read_text())
+            result = TrialResult.from_record(record["result"])
+            timings = dict(record["timings"])
+            if (result.planner, result.trial) != (task.planner, task.trial):
+                raise ValueError(f"{path.name} holds another trial")
+        except (ValueError, KeyError, TypeError):  # json.JSONDecodeError is a ValueError
+            path.unlink()
+            continue
+        done[i] = (result, timings)
+    print(f"[{STAGE}] resuming: {len(done)} of {len(tasks)} trials already run")
+    return done
 
 
 def _write_results(run: StageRun, cfg: DictConfig, results: list) -> None:

@@ -35,6 +35,7 @@ plan and the outcome it observed (its retry memory, ``pipeline.controller.retry`
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from types import SimpleNamespace
@@ -115,6 +116,35 @@ class TrialResult:
     @property
     def planning_s(self) -> float:
         return float(sum(a.planning_s for a in self.attempts))
+
+    @property
+    def has_log_data(self) -> bool:
+        """The trial kept what the logs draw (``trace``, ``final_home``): a logged trial."""
+        return bool(self.trace or self.final_home)
+
+    def to_record(self) -> dict:
+        """The result as JSON-ready data, every field but the log data (``trace``,
+        ``final_home``), ``planning_s`` of each attempt included; ``from_record`` reads it
+        back. Raises ``ValueError`` for a trial with log data, which the record would lose."""
+        if self.has_log_data:
+            raise ValueError(f"trial {self.trial} of {self.planner} holds log data")
+        return {
+            "trial": self.trial,
+            "planner": self.planner,
+            "boxes": self.boxes,
+            "picked": self.picked,
+            "end": self.end,
+            "attempts": [dataclasses.asdict(a) for a in self.attempts],
+            "no_grasp": self.no_grasp,
+        }
+
+    @classmethod
+    def from_record(cls, record: dict) -> TrialResult:
+        """The result ``to_record`` wrote (raises ``KeyError`` or ``TypeError`` on another)."""
+        fields = ("trial", "planner", "boxes", "picked", "end", "no_grasp")
+        return cls(
+            **{k: record[k] for k in fields}, attempts=[Attempt(**a) for a in record["attempts"]]
+        )
 
 
 def _surface_for_log(feats) -> SimpleNamespace:

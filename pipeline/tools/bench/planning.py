@@ -154,8 +154,8 @@ def dexnet_figures(cfg, num_images: int = 6) -> dict[str, float]:
     with the CEM's mixtures on the BLAS and OpenMP libraries' own thread setting instead of
     ``pipeline.dexnet.cem.GMM_THREADS`` (``_gmm_threads_default_ms``) and the same with the
     GQ-CNN pooling by ``max_pool2d`` instead of ``MaxPool2x2``'s inference path
-    (``_max_pool2d_ms``), interleaved with the first, same draws; and the GQ-CNN's training
-    throughput (crops/s, batch 64) in both memory layouts, alternating."""
+    (``_max_pool2d_ms``), interleaved with the first, same draws; and
+    ``gqcnn_training_figures``."""
     import torch
 
     from pipeline.artifacts.fingerprint import REPO_ROOT
@@ -231,6 +231,19 @@ def dexnet_figures(cfg, num_images: int = 6) -> dict[str, float]:
             f"(mixtures on the libraries' own threads: "
             f"{out[f'{key}_gmm_threads_default_ms']:.1f} ms/image{pooling})"
         )
+    out.update(gqcnn_training_figures(full))
+    return out
+
+
+def gqcnn_training_figures(full) -> dict[str, float]:
+    """The GQ-CNN's training throughput (crops/s, batch 64, the ``baseline`` config ``full``'s
+    network) in both memory layouts, alternating, and in the layout the baseline uses."""
+    import torch
+
+    from pipeline.dexnet.gqcnn import GQCNN
+    from pipeline.dexnet.planner import gqcnn_config
+
+    out: dict[str, float] = {}
     size = int(full.dexnet.crop.size)
     x, pose = torch.randn(64, 1, size, size), torch.randn(64, 2)
     y = (torch.rand(64) > 0.5).float()
