@@ -38,6 +38,24 @@ def _cfg(root, *extra):
     )
 
 
+def _interrupted_at_second_trial(root, monkeypatch, *extra):
+    """Run the evaluation in ``root``, interrupted (Ctrl-C) while its second trial runs; the
+    work folder it leaves."""
+    run_task = evaluate_mod.run_task
+
+    def interrupt_second(task):
+        if task.trial == 1:
+            raise KeyboardInterrupt
+        return run_task(task)
+
+    with monkeypatch.context() as m:
+        m.setattr(evaluate_mod, "run_task", interrupt_second)
+        with pytest.raises(KeyboardInterrupt):
+            evaluate_mod.evaluate(_cfg(root, *extra))
+    (work,) = (root / "data" / "evaluate").glob(f"{TMP_PREFIX}*")
+    return work
+
+
 def test_trial_record_reads_back_to_the_same_result():
     a = Attempt(3, 0, "dcnn", "B", [10.5, 20.25], target_body=7, target_type="medium")
     a.outcome, a.final_error, a.path_deviation_m = "dropped", [0.001, float("nan")], None
@@ -56,17 +74,7 @@ def test_interrupted_evaluation_resumes_to_the_same_artifact(tmp_path, monkeypat
     # runs the second only.
     root = tmp_path / "resumed"
     run_task = evaluate_mod.run_task
-
-    def interrupt_second(task):
-        if task.trial == 1:
-            raise KeyboardInterrupt
-        return run_task(task)
-
-    with monkeypatch.context() as m:
-        m.setattr(evaluate_mod, "run_task", interrupt_second)
-        with pytest.raises(KeyboardInterrupt):
-            evaluate_mod.evaluate(_cfg(root, "evaluate.log_trials=0"))
-    (work,) = (root / "data" / "evaluate").glob(f"{TMP_PREFIX}*")
+    work = _interrupted_at_second_trial(root, monkeypatch, "evaluate.log_trials=0")
     assert [p.name for p in (work / STATE_DIR / "trials").iterdir()] == ["000000.json"]
 
     ran = []
@@ -94,17 +102,7 @@ def test_unreadable_or_logged_trials_are_run_again(tmp_path, monkeypatch, capsys
     data is not kept."""
     root = tmp_path / "root"
     run_task = evaluate_mod.run_task
-
-    def interrupt_second(task):
-        if task.trial == 1:
-            raise KeyboardInterrupt
-        return run_task(task)
-
-    with monkeypatch.context() as m:
-        m.setattr(evaluate_mod, "run_task", interrupt_second)
-        with pytest.raises(KeyboardInterrupt):
-            evaluate_mod.evaluate(_cfg(root, "evaluate.log_trials=1"))
-    (work,) = (root / "data" / "evaluate").glob(f"{TMP_PREFIX}*")
+    work = _interrupted_at_second_trial(root, monkeypatch, "evaluate.log_trials=1")
     assert not (work / STATE_DIR / "trials").exists()  # trial 0 was logged: not kept
 
     # A record cut short (as if written by other means: the stage writes them atomically).
