@@ -9,7 +9,10 @@ STAGE ?= generate
 NPROC ?= 1
 # Test workers (pytest-xdist): one per core, at most 4; each takes whole test files (TEST_WORKERS=0: one process).
 TEST_WORKERS ?= auto
-PYTEST := $(PY) -m pytest -q $(if $(filter 0,$(TEST_WORKERS)),,-n $(TEST_WORKERS) --maxprocesses 4 --dist loadfile)
+# Tests keep Python's compiled bytecode (__pycache__, ignored by git) even where the environment
+# sets PYTHONDONTWRITEBYTECODE: every worker and every stage subprocess a test starts would
+# otherwise compile the package and rewrite the test modules again.
+PYTEST := env -u PYTHONDONTWRITEBYTECODE $(PY) -m pytest -q $(if $(filter 0,$(TEST_WORKERS)),,-n $(TEST_WORKERS) --maxprocesses 4 --dist loadfile)
 RUN := $(PY) -m
 # NPROC > 1: data-parallel training, one process per CPU share or GPU (torchrun + DDP).
 TRAIN := $(if $(filter-out 1,$(NPROC)),.venv/bin/torchrun --standalone --nproc_per_node=$(NPROC) -m,$(RUN)) pipeline.stages.train

@@ -3,14 +3,24 @@ one smoke pipeline (generation, labels, a trained network) built once per test s
 
 from __future__ import annotations
 
+import os
+
+# Test workers share two cores, and the tests that train or run stage subprocesses start OpenMP
+# threads of their own: an idle OpenMP thread sleeps instead of spinning on a core another
+# worker needs (set before torch loads its OpenMP runtime, which reads it once; subprocesses
+# inherit it).
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
 import dataclasses
 import functools
+import hashlib
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
 
 import pybullet as p
 import pytest
+from filelock import FileLock
 
 from pipeline.runtime.cli import compose
 
@@ -179,18 +189,41 @@ def build_smoke_root(
 def smoke_pipelines(tmp_path_factory):
     """A factory: ``smoke_pipelines("sensor=sr300", stages=("generate", "label"))`` → the
     ``SmokeRoot`` of the session's smoke pipeline with those extra overrides (later overrides
-    win), built once per session and set of overrides. Read-only, like ``smoke_pipeline``."""
+    win), built once per session and set of overrides (under pytest-xdist, once for all the
+    workers). Read-only, like ``smoke_pipeline``."""
     built: dict = {}
+    shared = _shared_tmp(tmp_path_factory)
 
     def get(*extra: str, stages: tuple[str, ...] = PIPELINE_STAGES) -> SmokeRoot:
         key = (extra, tuple(stages))
-        if key not in built:
+        if key in built:
+            return built[key]
+        if shared is None:
             built[key] = build_smoke_root(
                 tmp_path_factory.mktemp("smoke_pipeline"), *extra, stages=stages
             )
+            return built[key]
+        # Under pytest-xdist the first worker to ask builds it, the others wait and read it.
+        name = hashlib.sha256(repr(key).encode()).hexdigest()[:16]
+        root, done = shared / f"smoke_pipeline_{name}", shared / f"smoke_pipeline_{name}.done"
+        with FileLock(str(root) + ".lock"):
+            if not done.exists():
+                if root.exists():  # a worker that failed half-way
+                    shutil.rmtree(root)
+                build_smoke_root(root, *extra, stages=stages)
+                done.touch()
+        built[key] = SmokeRoot(root, tuple(extra))
         return built[key]
 
     return get
+
+
+def _shared_tmp(tmp_path_factory) -> Path | None:
+    """The folder every pytest-xdist worker of this run shares (the parent of the workers' own
+    temporary folders), or None in a run without workers."""
+    if os.environ.get("PYTEST_XDIST_WORKER") is None:
+        return None
+    return tmp_path_factory.getbasetemp().parent
 
 
 @pytest.fixture(scope="session")

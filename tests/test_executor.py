@@ -30,7 +30,9 @@ TINY = (
     "logging.max_logged_scenes=2",
     "logging.progress=false",
 )
-RUNS = (("local", 1), ("local", 2), ("ray", 2))
+# One local worker against two Ray workers; one local worker against two local ones is
+# test_generate.py's and test_label.py's "same whatever the workers".
+RUNS = (("local", 1), ("ray", 2))
 RAY = conf_section("executor", "executor=ray")
 
 
@@ -79,7 +81,7 @@ def ray_instance():
 
 @pytest.fixture(scope="module")
 def artifacts(tmp_path_factory, request):
-    """{(executor, workers): (generation folder, label folder)}; local runs first (fork)."""
+    """{(executor, workers): (generation folder, label folder)}; the local run first."""
     out = {}
     for executor, workers in RUNS:
         if executor == "ray":
