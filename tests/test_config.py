@@ -11,7 +11,7 @@ from omegaconf import MISSING, OmegaConf
 
 from pipeline.config import physical, schema, stage_sections
 from pipeline.config.build import from_section
-from pipeline.runtime.cli import CONF_DIR, compose
+from pipeline.runtime.cli import CONF_DIR, compose, compose_uncached
 
 ROOTS = (
     "generate",
@@ -82,3 +82,53 @@ def test_executor_options_are_the_executors_only():
     assert options == ["local", "ray"]
     with pytest.raises(MissingConfigException, match="local"):
         compose("generate", ["experiment=smoke", "executor=ray_settings"])
+
+
+# Value overrides of every kind (a scalar, a list, null, an interpolation, an added key, a deleted
+# key) beside config-group choices, as tests, benchmarks and the studies compose them.
+SAME_WAY = [
+    ["experiment=smoke"],
+    ["experiment=smoke", "paths.root=/tmp/a", "generate.num_scenes=4", "logging.progress=false"],
+    ["experiment=default", "sensor=sr300", "paths.root=/tmp/b", "servo.normal_smoothing=2"],
+    ["experiment=smoke", "evaluate.planners=[dcnn,oracle]", "hand.rotations_deg=[0]"],
+    ["experiment=smoke", "evaluate.dcnn_fallback_ratio=null", "evaluate.train_version=${seed}"],
+    ["experiment=smoke", "+extra_key=1", "+extra_two=2", "~extra_two", "executor=ray"],
+    ["paths.root=/tmp/c", "experiment=paper", "depth_filter=fill_median"],
+]
+# Bad overrides: both ways raise the same error.
+BAD = [
+    ["experiment=smoke", "generate.num_scene=3"],  # a typo in a key
+    ["experiment=smoke", "generate.num_scenes=many"],  # a wrong type
+    ["experiment=smoke", "camera.fx=[1,2]"],
+    ["experiment=smok"],  # an unknown option of a group
+    ["experiment=smoke", "+seed=2"],  # adding a key that exists
+    ["experiment=smoke", "~no_such_key"],
+]
+
+
+@pytest.mark.parametrize("root", ["generate", "ablation"])
+def test_compose_is_hydras_composition(root):
+    """``compose`` keeps the group choices' composition and applies value overrides to a copy:
+    the same config, flags and node types as Hydra's whole composition. The override lists
+    share group choices, so most of them take the kept composition."""
+    for overrides in SAME_WAY:
+        want = compose_uncached(root, overrides)
+        got = compose(root, overrides)
+        assert OmegaConf.to_yaml(got) == OmegaConf.to_yaml(want), (root, overrides)
+        assert OmegaConf.is_struct(got) and OmegaConf.is_struct(want)
+        assert OmegaConf.get_type(got.paths, "root") is OmegaConf.get_type(want.paths, "root")
+
+
+@pytest.mark.parametrize("overrides", BAD, ids=lambda o: o[-1])
+def test_compose_raises_hydras_errors(overrides):
+    with pytest.raises(Exception) as want:
+        compose_uncached("evaluate", overrides)
+    with pytest.raises(want.type) as got:
+        compose("evaluate", overrides)
+    assert str(got.value) == str(want.value)
+
+
+def test_composed_copies_are_independent():
+    a = compose("generate", ["experiment=smoke"])
+    a.generate.num_scenes = 12345
+    assert compose("generate", ["experiment=smoke"]).generate.num_scenes != 12345

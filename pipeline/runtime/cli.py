@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import functools
 import importlib
 import os
@@ -150,8 +151,29 @@ def stage_command(
 def compose(config_name: str, overrides: list[str]) -> DictConfig:
     """The config a stage gets from ``python -m pipeline.<config_name> <overrides>``.
 
-    For tests, benchmarks and notebooks; raises Hydra's errors on unknown keys or bad types.
+    For tests, benchmarks, notebooks and the studies' sub-stages; raises Hydra's errors on
+    unknown keys or bad types. The result is :func:`compose_uncached`'s: Hydra composes the
+    files that the config-group overrides (``experiment=smoke``, ``sensor=sr300``) choose, then
+    applies the value overrides (``paths.root=...``, ``+key=...``, ``~key``) to the result. This
+    process keeps the first step's result per config name and group choices, for as long as no
+    file in ``conf/`` changes, and applies the value overrides to a copy of it with Hydra's own
+    override code: a composition differing in values only takes a copy instead of a full one.
+    Overrides of Hydra's own settings, of a ``@package``, sweeps and dict values of a group go
+    the uncached way.
     """
+    split = _group_and_value_overrides(overrides)
+    if split is None:
+        return compose_uncached(config_name, overrides)
+    groups, values = split
+    from hydra._internal.config_loader_impl import ConfigLoaderImpl
+
+    cfg = copy.deepcopy(_composed_groups(config_name, tuple(groups), _conf_files_state()))
+    ConfigLoaderImpl._apply_overrides_to_config(values, cfg)
+    return cfg
+
+
+def compose_uncached(config_name: str, overrides: list[str]) -> DictConfig:
+    """Hydra's composition of ``conf/<config_name>.yaml`` with ``overrides``, from the files."""
     from hydra import compose as hydra_compose
     from hydra import initialize_config_dir
     from hydra.core.global_hydra import GlobalHydra
@@ -162,6 +184,49 @@ def compose(config_name: str, overrides: list[str]) -> DictConfig:
             return hydra_compose(config_name=config_name, overrides=overrides)
     finally:
         GlobalHydra.instance().clear()
+
+
+@functools.lru_cache(maxsize=64)
+def _composed_groups(config_name: str, groups: tuple[str, ...], conf_state: tuple) -> DictConfig:
+    """``compose_uncached(config_name, groups)``, kept per ``conf_state`` of the files (never
+    returned itself: :func:`compose` copies it)."""
+    return compose_uncached(config_name, list(groups))
+
+
+def _conf_files_state() -> tuple:
+    """(relative path, modification time, size) of every file in ``conf/``."""
+    root = Path(CONF_DIR)
+    return tuple(
+        (str(p.relative_to(root)), st.st_mtime_ns, st.st_size)
+        for p in sorted(root.rglob("*"))
+        if p.is_file() and (st := p.stat())
+    )
+
+
+def _group_and_value_overrides(overrides: list[str]):
+    """(the config-group overrides as given, the parsed value overrides), split as Hydra splits
+    them (an override of a key naming a group folder of ``conf/`` chooses a config file, unless
+    its value is a dict); None when an override needs Hydra's whole composition (one of Hydra's
+    own settings, a ``@package``, a sweep or a dict value for a group)."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from hydra.errors import HydraException
+
+    try:
+        parsed = OverridesParser.create().parse_overrides(list(overrides))
+    except HydraException:
+        return None  # Hydra raises its own error on the uncached way
+    groups, values = [], []
+    for line, o in zip(overrides, parsed, strict=True):
+        if o.is_hydra_override() or o.is_sweep_override() or o.package is not None:
+            return None
+        key = o.key_or_group
+        if "." not in key and (Path(CONF_DIR) / key).is_dir():
+            if isinstance(o.value(), dict):
+                return None
+            groups.append(line)
+        else:
+            values.append(o)
+    return groups, values
 
 
 def run_named_stage(stage: str, overrides: list[str], caller: str) -> Path:

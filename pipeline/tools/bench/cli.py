@@ -9,6 +9,7 @@ import tempfile
 
 from pipeline.runtime.cli import compose
 from pipeline.tools.bench.common import BENCH_SEED
+from pipeline.tools.bench.configs import compose_figures
 from pipeline.tools.bench.executors import executor_figures
 from pipeline.tools.bench.planning import (
     closed_loop_figures,
@@ -45,6 +46,7 @@ def main(argv: list[str] | None = None) -> int:
             "sensor",
             "ood",
             "gpu",
+            "config",
         ),
         default="all",
         help="run one group of figures",
@@ -83,6 +85,9 @@ def main(argv: list[str] | None = None) -> int:
         )
         print(json.dumps({k: round(v, 3) for k, v in results.items()}))
         return 0
+    if args.only == "config":
+        print(json.dumps({k: round(v, 3) for k, v in compose_figures().items()}))
+        return 0
     if args.only == "sensor":
         results.update(sensor_figures())
         print(json.dumps({k: round(v, 4) for k, v in results.items()}))
@@ -98,6 +103,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     results.update(_stage_and_training_figures(cfg, args.scenes))
     if args.only == "all":
+        results.update(compose_figures())
         results.update(dexnet_figures(cfg))
         results.update(closed_loop_figures())
     print(json.dumps({k: round(v, 3) for k, v in results.items()}))
