@@ -5,15 +5,16 @@ Each stage runs as a subprocess through its command line (``python -m pipeline.<
 killed (``Popen.kill``) once the file system shows it reached a point (its work folder exists,
 N shard files are written, the log is being written, a training checkpoint appears), and is run
 again to completion. The result is compared with an uninterrupted reference run in another
-``paths.root``: same version, same files (``pipeline.tools.repro_check.compare_artifacts``, Rerun
-logs
-by content) and the same manifest apart from ``created`` and ``timings``.
+``paths.root`` (in the test's process, with the same overrides): same version, same files
+(``pipeline.tools.repro_check.compare_artifacts``, Rerun logs by content) and the same manifest
+apart from ``created`` and ``timings``.
 
 The default run keeps one kill per stage; ``-m slow`` adds kills at more points.
 """
 
 from __future__ import annotations
 
+import importlib
 import os
 import re
 import shutil
@@ -39,6 +40,7 @@ from pipeline.artifacts.store import (
     run_stage,
     verify_artifact,
 )
+from pipeline.runtime.cli import compose
 from pipeline.tools.repro_check import compare_artifacts
 
 OVERRIDES = (
@@ -57,15 +59,12 @@ TOP = {"generate": "data", "label": "data", "train": "models"}
 VOLATILE = ("created", "timings")
 
 
+def _overrides(root: Path, workers: int = 1) -> list[str]:
+    return [f"paths.root={root}", *OVERRIDES, f"generate.workers={workers}"]
+
+
 def _cmd(stage: str, root: Path, workers: int = 1) -> list[str]:
-    return [
-        sys.executable,
-        "-m",
-        stage_module(stage),
-        f"paths.root={root}",
-        *OVERRIDES,
-        f"generate.workers={workers}",
-    ]
+    return [sys.executable, "-m", stage_module(stage), *_overrides(root, workers)]
 
 
 def _env() -> dict:
@@ -172,11 +171,13 @@ def _resumed_shards(out: str, stage: str) -> int:
 
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory) -> dict[str, Path]:
-    """Uninterrupted runs of the three stages."""
+    """Uninterrupted runs of the three stages, in this process, with the overrides of their
+    command line (``_cmd``)."""
     root = tmp_path_factory.mktemp("reference")
     folders = {}
     for stage in ("generate", "label", "train"):
-        _run(stage, root)
+        fn = getattr(importlib.import_module(stage_module(stage)), stage)
+        fn(compose(stage, _overrides(root)))
         folders[stage] = resolve_artifact(root / TOP[stage], stage)
     return folders
 
