@@ -196,26 +196,30 @@ def smoke_pipelines(tmp_path_factory):
 
     def get(*extra: str, stages: tuple[str, ...] = PIPELINE_STAGES) -> SmokeRoot:
         key = (extra, tuple(stages))
-        if key in built:
-            return built[key]
-        if shared is None:
-            built[key] = build_smoke_root(
-                tmp_path_factory.mktemp("smoke_pipeline"), *extra, stages=stages
-            )
-            return built[key]
-        # Under pytest-xdist the first worker to ask builds it, the others wait and read it.
-        name = hashlib.sha256(repr(key).encode()).hexdigest()[:16]
-        root, done = shared / f"smoke_pipeline_{name}", shared / f"smoke_pipeline_{name}.done"
-        with FileLock(str(root) + ".lock"):
-            if not done.exists():
-                if root.exists():  # a worker that failed half-way
-                    shutil.rmtree(root)
-                build_smoke_root(root, *extra, stages=stages)
-                done.touch()
-        built[key] = SmokeRoot(root, tuple(extra))
+        if key not in built:
+            if shared is None:
+                root = tmp_path_factory.mktemp("smoke_pipeline")
+                built[key] = build_smoke_root(root, *extra, stages=stages)
+            else:
+                built[key] = _built_once_for_all_workers(shared, key)
         return built[key]
 
     return get
+
+
+def _built_once_for_all_workers(shared: Path, key: tuple) -> SmokeRoot:
+    """``build_smoke_root`` of ``key`` = (extra overrides, stages) in ``shared``: the first
+    pytest-xdist worker to ask builds it under a file lock, the others wait and read it."""
+    extra, stages = key
+    name = hashlib.sha256(repr(key).encode()).hexdigest()[:16]
+    root, done = shared / f"smoke_pipeline_{name}", shared / f"smoke_pipeline_{name}.done"
+    with FileLock(str(root) + ".lock"):
+        if not done.exists():
+            if root.exists():  # a worker that failed half-way
+                shutil.rmtree(root)
+            build_smoke_root(root, *extra, stages=stages)
+            done.touch()
+    return SmokeRoot(root, tuple(extra))
 
 
 def _shared_tmp(tmp_path_factory) -> Path | None:

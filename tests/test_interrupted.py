@@ -14,7 +14,6 @@ The default run keeps one kill per stage; ``-m slow`` adds kills at more points.
 
 from __future__ import annotations
 
-import importlib
 import os
 import re
 import shutil
@@ -40,7 +39,7 @@ from pipeline.artifacts.store import (
     run_stage,
     verify_artifact,
 )
-from pipeline.runtime.cli import compose
+from pipeline.runtime.cli import run_named_stage
 from pipeline.tools.repro_check import compare_artifacts
 
 OVERRIDES = (
@@ -176,9 +175,7 @@ def reference(tmp_path_factory) -> dict[str, Path]:
     root = tmp_path_factory.mktemp("reference")
     folders = {}
     for stage in ("generate", "label", "train"):
-        fn = getattr(importlib.import_module(stage_module(stage)), stage)
-        fn(compose(stage, _overrides(root)))
-        folders[stage] = resolve_artifact(root / TOP[stage], stage)
+        folders[stage] = run_named_stage(stage, _overrides(root), "reference")
     return folders
 
 
