@@ -146,9 +146,6 @@ def _fmax(a, b):
 
 @njit(cache=True, inline="always")
 def _fmin(a, b):
-    """``np.fmin`` of two scalars: the smaller; a nan loses to a number."""
-    if a != a:
-        return b
-    if b != b:
-        return a
-    return a if a <= b else b
+    """``np.fmin`` of two scalars: the smaller; a nan loses to a number (``-fmax(-a, -b)``,
+    which keeps the sign of a zero as ``np.fmin`` does)."""
+    return -_fmax(-a, -b)
