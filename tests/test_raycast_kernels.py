@@ -148,3 +148,16 @@ def test_ground_bit_for_bit():
             assert same(depth, ref_depth) and same(ids, ref_ids)
             kinds |= set(np.unique(ids).tolist())
     assert kinds == {-1, 3, 7}  # ground, box and nothing (beyond far, above the horizon)
+
+
+def test_scalar_fmin_fmax_are_numpys():
+    """The loops' scalar ``_fmin`` / ``_fmax`` give ``np.fmin`` / ``np.fmax`` for every pair of
+    nan, signed zeros, infinities and numbers, the sign of a zero included."""
+    from pipeline.camera.raycast_kernels import _fmax, _fmin
+
+    values = [np.nan, 0.0, -0.0, 1.5, -2.25, np.inf, -np.inf, 1e-300, 3.0]
+    for mine, numpys in ((_fmin, np.fmin), (_fmax, np.fmax)):
+        for a in values:
+            for b in values:
+                want, got = numpys(a, b), mine(a, b)
+                assert same(np.float64(want), np.float64(got)), (numpys.__name__, a, b, got)
