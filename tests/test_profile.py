@@ -51,3 +51,30 @@ def test_shares_worked_by_hand():
     assert rows["robot checks (IK, collisions)"] == (2, pytest.approx(0.125))
     assert rows[OTHER] == (2, pytest.approx(0.125))
     assert summarise([]) == []
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["evaluate", "--rate", "50", "evaluate.num_trials=4", "planner=dcnn"],
+        ["--rate", "50", "evaluate", "evaluate.num_trials=4", "planner=dcnn"],
+        ["evaluate", "evaluate.num_trials=4", "planner=dcnn", "--rate", "50"],
+    ],
+)
+def test_options_may_stand_anywhere_on_the_command_line(argv):
+    from pipeline.tools.profile import parse_args
+
+    args = parse_args(argv)
+    assert (args.stage, args.overrides, args.rate) == (
+        "evaluate",
+        ["evaluate.num_trials=4", "planner=dcnn"],
+        50,
+    )
+
+
+def test_no_stage_and_no_sample_file_is_an_error(capsys):
+    from pipeline.tools.profile import parse_args
+
+    with pytest.raises(SystemExit):
+        parse_args(["--rate", "50"])
+    assert "name a stage" in capsys.readouterr().err

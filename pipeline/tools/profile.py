@@ -1,7 +1,7 @@
 """Where a stage's time goes: run it under py-spy and print the share of each part of the method.
 
     python -m pipeline.tools.profile label experiment=smoke            # make profile STAGE=label
-    python -m pipeline.tools.profile evaluate --rate 50 -- evaluate.num_trials=4
+    python -m pipeline.tools.profile evaluate --rate 50 evaluate.num_trials=4
     python -m pipeline.tools.profile --summarise data/profile/label.txt  # an earlier sample
 
 The stage runs as ``python -m pipeline.stages.<stage> <overrides>`` under ``py-spy record``
@@ -98,19 +98,26 @@ def print_summary(path: Path) -> None:
         print(f"  {100 * share:5.1f} %  {name}  ({n})")
 
 
-def main(argv: list[str] | None = None) -> int:
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """The command line: the stage, its Hydra overrides and the options, which may stand
+    anywhere among them (``evaluate --rate 50 evaluate.num_trials=4``)."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("stage", nargs="?", help="stage name, e.g. label")
     parser.add_argument("overrides", nargs="*", help="Hydra overrides for the stage")
     parser.add_argument("--rate", type=int, default=20, help="samples per second (20)")
     parser.add_argument("--out", type=Path, default=REPO_ROOT / "data" / "profile")
     parser.add_argument("--summarise", type=Path, help="summarise this sample file only")
-    args = parser.parse_args(argv)
+    args = parser.parse_intermixed_args(argv)
+    if args.summarise is None and not args.stage:
+        parser.error("name a stage (e.g. label) or give --summarise FILE")
+    return args
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
     if args.summarise is not None:
         print_summary(args.summarise)
         return 0
-    if not args.stage:
-        parser.error("name a stage (e.g. label) or give --summarise FILE")
     beside = Path(sys.executable).with_name("py-spy")  # the project's environment first
     spy = str(beside) if beside.exists() else shutil.which("py-spy")
     if spy is None:
