@@ -174,6 +174,41 @@ def test_hold_check_one_cup_on_a_tilted_end_face(tilt_deg, holds):
     assert pattern_holds(surf, lab, box, T_world_cam, light, CFG.cup_offset)
 
 
+@pytest.mark.parametrize("tolerance, holds", [(0.0, True), (0.032, True), (0.034, False)])
+def test_hold_check_with_the_cup_landing_off_its_point(tolerance, holds):
+    """``hand.hold_landing_tolerance``: one cup on the level end face of a medium box (400
+    kg/m³: m = 400 × 0.145 × 0.092 × 0.052 = 0.27747 kg, m g = 2.7220 N), shifted sideways by
+    d. Level, the weight is along the axis: no shear, no torsion; f_N = 12.7 − 2.7220 =
+    9.9780 N and bending = d m g / r ≤ f_N holds up to d = 9.9780 × 0.009 / 2.7220 = 33.0 mm,
+    in every direction of the plane (the diagonals too)."""
+    from conftest import composed
+
+    from pipeline.grasping.suction import suction_model_config
+    from pipeline.labelling.scene import pattern_holds
+
+    suction = suction_model_config(composed(), 400.0)
+    surf, box, T_world_cam = _tilted_end_face(0.0)
+    lab = dataclasses.replace(hand_label(surf, CFG), grasp_class=GraspClass.L)
+    ok = pattern_holds(surf, lab, box, T_world_cam, suction, CFG.cup_offset, tolerance)
+    assert ok is holds
+
+
+def test_landing_shifts_by_hand():
+    """None first, then 8 shifts of the tolerance's length, 45° apart in the x-y plane."""
+    from pipeline.labelling.scene import landing_shifts
+
+    x, y = np.array([1.0, 0, 0]), np.array([0, 1.0, 0])
+    assert landing_shifts(x, y, 0.0).tolist() == [[0.0, 0.0, 0.0]]
+    s = landing_shifts(x, y, 0.01)
+    assert s.shape == (9, 3)
+    np.testing.assert_allclose(s[0], 0.0)
+    np.testing.assert_allclose(np.linalg.norm(s[1:], axis=1), 0.01)
+    np.testing.assert_allclose(s[1], [0.01, 0, 0], atol=1e-15)
+    np.testing.assert_allclose(s[2], [0.01 / np.sqrt(2), 0.01 / np.sqrt(2), 0], atol=1e-15)
+    np.testing.assert_allclose(s[3], [0, 0.01, 0], atol=1e-15)
+    np.testing.assert_allclose(s[5], [-0.01, 0, 0], atol=1e-15)
+
+
 def test_a_blocked_b_falls_back_on_one_cup_by_hand():
     """``robot_level_class``: B passes → B; B blocked ("collision") with L passing → L; L
     failing its hold test and R passing → R; both blocked → NG with B's reason; no fallback

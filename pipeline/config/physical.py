@@ -200,6 +200,8 @@ class HandConfig:
     rotations_deg: list[float] = MISSING
     # labels: a pattern whose cups would not hold the box's weight (the suction hold test) is NG
     hold_check: bool = MISSING
+    # labels' hold check: the cups must also hold when they land this far off their points (m)
+    hold_landing_tolerance: float = MISSING
     payload_kg: float = MISSING  # the heaviest box the hand is meant to lift (both cups)
 
 

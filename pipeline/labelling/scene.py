@@ -17,6 +17,7 @@ labelled L or R and dropped.
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 
 import numpy as np
@@ -42,9 +43,13 @@ def pattern_holds(
     T_world_cam: np.ndarray,
     suction: SuctionModelConfig,
     cup_offset: float,
+    landing_tolerance: float = 0.0,
 ) -> bool:
     """Whether ``hl``'s pattern, its cups placed on ``surface`` as the pattern puts them, holds
-    ``box``'s weight by ``pipeline.grasping.suction.hold_test`` (module docstring).
+    ``box``'s weight by ``pipeline.grasping.suction.hold_test`` (module docstring). With
+    ``landing_tolerance`` > 0 (``hand.hold_landing_tolerance``, m) it must also hold with all its
+    cups shifted together by that distance in each of 8 directions in the surface's plane: ± the
+    hand's X, ± its Y, and the four diagonals (:func:`landing_shifts`).
 
     Frames: ``surface`` and ``box.T_cam_box`` in the camera frame, ``T_world_cam`` the camera's
     pose in the world (z up); metres. ``suction``: cup radius, vacuum force, friction, gravity
@@ -55,22 +60,33 @@ def pattern_holds(
 
     n = np.asarray(surface.normal_cam, np.float64)
     c = np.asarray(surface.center_cam, np.float64)
+    x = np.asarray(hl.x_axis_cam, np.float64)
+    y = np.cross(-n, x)  # hand y = z × x, z = −n
+    y /= np.linalg.norm(y)
     if hl.grasp_class == GraspClass.B:
-        y = np.cross(-n, np.asarray(hl.x_axis_cam, np.float64))  # hand y = z × x, z = −n
-        y /= np.linalg.norm(y)
         points = np.stack([c - cup_offset * y, c + cup_offset * y])
     else:
         points = c[None]
     gravity_cam = T_world_cam[:3, :3].T @ np.array([0.0, 0.0, -suction.gravity])
-    return hold_test(
-        box_mass(box, suction.density),
-        box.T_cam_box[:3, 3],
-        points,
-        -n,
-        gravity_cam,
-        suction,
-        cup_offset,
-    ).ok
+    mass = box_mass(box, suction.density)
+    return all(
+        hold_test(
+            mass, box.T_cam_box[:3, 3], points + shift, -n, gravity_cam, suction, cup_offset
+        ).ok
+        for shift in landing_shifts(x, y, landing_tolerance)
+    )
+
+
+def landing_shifts(x: np.ndarray, y: np.ndarray, tolerance: float) -> np.ndarray:
+    """(k, 3): the cups' shifts the hold check tries: none first, then with ``tolerance`` > 0
+    the 8 shifts of length ``tolerance`` along ±``x``, ±``y`` and the diagonals (unit vectors
+    in the surface's plane, camera frame; metres)."""
+    shifts = [np.zeros(3)]
+    if tolerance > 0:
+        for a in range(8):
+            t = math.radians(45.0 * a)
+            shifts.append(tolerance * (math.cos(t) * x + math.sin(t) * y))
+    return np.asarray(shifts)
 
 
 def single_cup_order(surface: Surface, hl: HandLabel, hand_cfg) -> tuple[GraspClass, ...]:
@@ -154,6 +170,7 @@ def label_scene(
                 scene.T_world_cam,
                 suction,
                 float(cfg.hand.cup_offset),
+                float(cfg.hand.hold_landing_tolerance),
             )
         ):
             hl = dataclasses.replace(hl, grasp_class=GraspClass.NG, reason="hold")
@@ -166,7 +183,13 @@ def label_scene(
                 lambda h, s=s, box=box: (
                     suction is None
                     or pattern_holds(
-                        s, h, box, scene.T_world_cam, suction, float(cfg.hand.cup_offset)
+                        s,
+                        h,
+                        box,
+                        scene.T_world_cam,
+                        suction,
+                        float(cfg.hand.cup_offset),
+                        float(cfg.hand.hold_landing_tolerance),
                     )
                 ),
                 single_cup_order(s, hl, cfg.hand) if bool(cfg.label.single_cup_fallback) else (),
