@@ -173,6 +173,32 @@ def test_the_preferred_clearance_never_rejects_what_the_check_accepts(runner):
     np.testing.assert_allclose(unreachable.x_world, plain.x_world)
 
 
+def test_each_rotation_is_predicted_once_over_both_clearances(runner, monkeypatch):
+    """B tries the hand turned by 0 and 180° (``hand.rotations_deg``). With a first-pass
+    clearance no path has (1 m) both rotations fail it on the bin, and the second pass accepts
+    0°: two servo predictions in all (not 2 + 1), and three motion checks (two at 1 m, one at
+    the labels' clearance)."""
+    import pipeline.labelling.grasp_check as gc
+
+    calls = {"predict": 0, "motion": 0}
+
+    def counting(name, fn):
+        def wrapped(*a, **k):
+            calls[name] += 1
+            return fn(*a, **k)
+
+        return wrapped
+
+    monkeypatch.setattr(gc, "servo_motion", counting("predict", gc.servo_motion))
+    monkeypatch.setattr(gc, "check_motion", counting("motion", gc.check_motion))
+    obs = _home(runner)
+    good = _grasp(obs, [0, 0, 0.052])
+    monkeypatch.setattr(runner.robot_side.checker, "comfort", 1.0)
+    check, reason = _check(runner, obs, good, "B")
+    assert reason is None and check is not None
+    assert calls == {"predict": 2, "motion": 3}
+
+
 def _fail(runner, obs, grasp, pattern, outcome="dropped"):
     """The robot remembers a failed plan of ``grasp`` with ``pattern`` on ``obs``."""
     from pipeline.controller.picker import Plan

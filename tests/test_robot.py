@@ -362,3 +362,19 @@ def test_collision_shortcuts_give_the_contacts_of_every_pair(cell):
         robot.set_joints(home)
         for b in boxes:
             p.removeBody(b, physicsClientId=client)
+
+
+def test_ik_seeds_try_home_once(cell):
+    """``Robot._seeds``: the given seed, the home pose unless the seed is it (the same seed
+    gives the same answer), then the ``ik_restarts`` perturbations of home."""
+    _, robot, _ = cell
+    restarts = robot.cfg.ik_restarts
+    home = robot.home_q()
+    from_home = list(robot._seeds(home))
+    from_other = list(robot._seeds(home + 0.1))
+    assert len(from_home) == 1 + restarts
+    assert len(from_other) == 2 + restarts
+    np.testing.assert_array_equal(from_other[1], home)
+    for a, b in zip(from_home[1:], from_other[2:]):
+        np.testing.assert_array_equal(a, b)
+    assert len(list(robot._seeds(None))) == 1 + restarts

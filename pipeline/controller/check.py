@@ -205,29 +205,26 @@ class RunTimeCheck:
         cfg = self.cfg
         if hand_fit and not pattern_fits(feats, pattern, cfg.hand):
             return None, "hand_fit"
-        check = None
         with self.heap.excluding(obs, uv, feats.region) as (obstacles, ignore):
-            obstacle_ids = list(self.bin_ids) + list(obstacles)
-            for clearance in ([self.comfort] if self.comfort is not None else []) + [None]:
-                check = check_grasp(
-                    self.robot,
-                    cfg,
-                    cfg.hand,
-                    obs.T_world_cam,
-                    centre_cam,
-                    feats.normal_cam,
-                    feats.long_axis_cam,
-                    feats.short_axis_cam,
-                    paper_x_axis(feats),
-                    pattern,
-                    obs.intrinsics,
-                    obstacle_ids,
-                    ignore,
-                    self.bin_ids,
-                    bin_clearance=clearance,
-                )
-                if check.reason is None:
-                    return check, None
+            check = check_grasp(
+                self.robot,
+                cfg,
+                cfg.hand,
+                obs.T_world_cam,
+                centre_cam,
+                feats.normal_cam,
+                feats.long_axis_cam,
+                feats.short_axis_cam,
+                paper_x_axis(feats),
+                pattern,
+                obs.intrinsics,
+                list(self.bin_ids) + list(obstacles),
+                ignore,
+                self.bin_ids,
+                bin_clearances=([self.comfort] if self.comfort is not None else []) + [None],
+            )
+        if check.reason is None:
+            return check, None
         return None, str(check.reason)
 
     def close(self) -> None:

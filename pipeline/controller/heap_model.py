@@ -44,13 +44,13 @@ columns along +x, cell (0, 0) at the bin's (−x, −y) corner. Metres.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 import pybullet as p
 
-from pipeline.camera.geometry import backproject_pixels
 from pipeline.controller.observation import Observation
 
 
@@ -129,15 +129,29 @@ def drop_flying_pixels(depth: np.ndarray, cfg: HeapModelConfig) -> np.ndarray:
     return np.where(keep, depth, 0.0)
 
 
-def world_points(obs: Observation) -> tuple[np.ndarray, np.ndarray]:
-    """(the (H, W, 3) world point of every pixel, the (H, W) bool of pixels with depth)."""
+@functools.lru_cache(maxsize=4)
+def _ray_factors(intr, h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
+    """((1, W) (u − cx) / fx, (H, 1) (v − cy) / fy): a pixel's camera x and y per metre of
+    depth (``pipeline.camera.geometry.backproject_pixels``'s factors), once per camera."""
+    ax = (np.arange(w, dtype=np.float64) - intr.cx) / intr.fx
+    ay = (np.arange(h, dtype=np.float64) - intr.cy) / intr.fy
+    for a in (ax, ay):
+        a.flags.writeable = False
+    return ax[None, :], ay[:, None]
+
+
+def world_points(obs: Observation) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
+    """((x, y, z), valid): the world coordinates (H, W) each of every pixel's point, and the
+    (H, W) bool of pixels with depth (the others are at the camera's centre)."""
     depth = np.asarray(obs.depth_m, np.float64)
     h, w = depth.shape
-    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
     valid = np.isfinite(depth) & (depth > 0)
-    pts = backproject_pixels(np.stack([u, v], axis=-1), np.where(valid, depth, 0.0), obs.intrinsics)
+    ax, ay = _ray_factors(obs.intrinsics, h, w)
+    z = np.where(valid, depth, 0.0)
+    x, y = ax * z, ay * z  # camera frame
     R, t = obs.T_world_cam[:3, :3], obs.T_world_cam[:3, 3]
-    return pts @ R.T + t, valid
+    world = tuple(x * R[i, 0] + y * R[i, 1] + z * R[i, 2] + t[i] for i in range(3))
+    return world, valid
 
 
 def build_heightmap(obs: Observation, bin_cfg, cfg: HeapModelConfig) -> HeightMap:
@@ -147,9 +161,8 @@ def build_heightmap(obs: Observation, bin_cfg, cfg: HeapModelConfig) -> HeightMa
     cell, tol = float(cfg.cell_m), float(cfg.bin_tolerance_m)
     nx, ny = int(np.ceil(2 * hx / cell - 1e-9)), int(np.ceil(2 * hy / cell - 1e-9))
     origin = np.array([-hx, -hy])
-    world, valid = world_points(obs)
+    (x, y, z), valid = world_points(obs)
     valid &= drop_flying_pixels(np.asarray(obs.depth_m, np.float64), cfg) > 0
-    x, y, z = world[..., 0], world[..., 1], world[..., 2]
     inside = valid & (np.abs(x) < hx) & (np.abs(y) < hy)
     on_bin = (np.abs(x) > hx - tol) | (np.abs(y) > hy - tol)  # the inner walls' band
     use = inside & ~on_bin

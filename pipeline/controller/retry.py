@@ -119,8 +119,8 @@ class RetryMemory:
         if dt > _SAME_POSE_M or np.degrees(np.arccos(np.clip(c, -1, 1))) > _SAME_POSE_DEG:
             return float("inf")
         now, then = self._smoothed_now(obs), f.depth_m
-        world, _ = world_points(obs)
-        near = np.hypot(world[..., 0] - f.point[0], world[..., 1] - f.point[1]) <= self.radius_m
+        (x, y, _), _ = world_points(obs)
+        near = np.hypot(x - f.point[0], y - f.point[1]) <= self.radius_m
         both = (now > 0) & (then > 0) & near
         changed = both & (np.abs(now - then) > self.depth_change_m)
         # a change thinner than 3 pixels is a sensor's flicker at depth steps, not a moved box

@@ -32,7 +32,7 @@ import numpy as np
 
 from pipeline.robot.approach import first_goal
 from pipeline.robot.model import Robot
-from pipeline.robot.path import PathCheckConfig, check_motion, path_config
+from pipeline.robot.path import check_motion, path_config
 from pipeline.robot.target_pose import hand_rotations, rotate_about, target_camera_pose
 from pipeline.robot.urdf_builder import CUP_TIP_Z
 from pipeline.servo.control import servo_config
@@ -72,7 +72,7 @@ def check_grasp(
     obstacle_ids,
     ignore_body_ids,
     bin_ids=(),
-    bin_clearance: float | None = None,
+    bin_clearances: Sequence[float | None] = (None,),
 ) -> GraspCheck:
     """The robot-level check of a grasp seen from the home camera ``T_world_cam`` (4, 4).
 
@@ -87,9 +87,14 @@ def check_grasp(
     surface (``centre_cam``, ``normal_cam``, axes ``long_cam``, ``short_cam``;
     :func:`pipeline.servo.predict.servo_motion`), must converge within ``servo.timeout_s``
     without running into the joint limits, and every sample of its motion
-    (:func:`pipeline.robot.path.check_motion`) must be collision-free, keeping
-    ``robot.path.bin_clearance`` (or ``bin_clearance``, m, when given) more from the bodies of
-    ``bin_ids``.
+    (:func:`pipeline.robot.path.check_motion`) must be collision-free, keeping a clearance more
+    from the bodies of ``bin_ids``.
+
+    ``bin_clearances``: the clearances (m; None: ``robot.path.bin_clearance``) tried in turn,
+    each over every rotation; the first (clearance, rotation) that passes is the answer. Only
+    the motion check depends on the clearance, so each rotation's IK, press and predicted
+    motion are worked out once, and a motion that failed on an obstacle other than the bin
+    (which no smaller clearance changes) is not checked again.
 
     ``robot`` is a loaded :class:`pipeline.robot.Robot` in a client whose ``obstacle_ids`` are
     what the caller knows of the surroundings: the labelling stage passes the heap's true boxes,
@@ -97,53 +102,82 @@ def check_grasp(
     (``pipeline.controller.heap_model``).
 
     Returns:
-        :class:`GraspCheck` of the first rotation that passes, else the failed check of the
-        first rotation. The robot is left at home.
+        :class:`GraspCheck` of the first clearance and rotation that pass, else the failed
+        check of the first rotation at the last clearance. The robot is left at home.
     """
-    path_cfg = path_config(cfg)
-    if path_cfg is not None and bin_clearance is not None:
-        path_cfg = dataclasses.replace(path_cfg, bin_clearance=float(bin_clearance))
+    base_path_cfg = path_config(cfg)
     home = robot.home_q()
     surface_cam = (centre_cam, normal_cam, long_cam, short_cam)
     bodies = (obstacle_ids, ignore_body_ids, bin_ids)
+    rotations = hand_rotations(pattern, hand_cfg.rotations_deg)
+    # per rotation: (grasp pose, x_rot, the reason before the motion check or None, the motion)
+    found: dict[int, tuple] = {}
+    # per rotation: the reason of a motion check that failed on the obstacles, not the bin
+    blocked: dict[int, str] = {}
     first = None
     try:
-        for rot in hand_rotations(pattern, hand_cfg.rotations_deg):
-            x_rot = rotate_about(x_axis_cam, normal_cam, rot)
-            grasp = T_world_cam @ target_camera_pose(
-                centre_cam,
-                normal_cam,
-                x_rot,
-                pattern,
-                standoff=float(hand_cfg.standoff),
-                cup_offset=float(hand_cfg.cup_offset),
-            )
-            res = robot.solve_ik(
-                grasp, seed_q=home, obstacle_ids=obstacle_ids, ignore_body_ids=ignore_body_ids
-            )
-            reason, poses = res.reason, None
-            if reason is None:
-                reason = press_reason(robot, grasp, res.q, hand_cfg, cfg, bin_ids)
-            if reason is None and path_cfg is not None:
-                reason, poses = _path_reason(
-                    robot,
-                    cfg,
-                    home,
-                    T_world_cam,
-                    surface_cam,
-                    x_rot,
-                    grasp[:3, 0],
-                    pattern,
-                    intrinsics,
-                    path_cfg,
-                    bodies,
-                )
-            if reason is None:
-                return GraspCheck(None, grasp[:3, 0].copy(), poses)
-            first = first or reason
+        for clearance in bin_clearances:
+            path_cfg = base_path_cfg
+            if path_cfg is not None and clearance is not None:
+                path_cfg = dataclasses.replace(path_cfg, bin_clearance=float(clearance))
+            first = None
+            for i, rot in enumerate(rotations):
+                if i not in found:
+                    found[i] = _pose_and_motion(
+                        robot, cfg, hand_cfg, home, T_world_cam, surface_cam, x_axis_cam,
+                        normal_cam, rot, pattern, intrinsics, path_cfg is not None, bodies,
+                    )  # fmt: skip
+                grasp, _, reason, motion = found[i]
+                poses = None if motion is None else motion.poses
+                if reason is None and path_cfg is not None:
+                    reason = blocked.get(i)
+                    if reason is None:
+                        path = check_motion(robot, motion.q, motion.poses, path_cfg, *bodies)
+                        if not path.ok:
+                            reason = "path_" + path.reason
+                            if not path.padded:
+                                blocked[i] = reason
+                if reason is None:
+                    return GraspCheck(None, grasp[:3, 0].copy(), poses)
+                first = first or reason
     finally:
         robot.set_joints(home)
     return GraspCheck(first, None, None)
+
+
+def _pose_and_motion(
+    robot, cfg, hand_cfg, home, T_world_cam, surface_cam, x_axis_cam, normal_cam, rot, pattern,
+    intrinsics, with_path, bodies,
+):  # fmt: skip
+    """For one hand rotation ``rot`` (degrees) of :func:`check_grasp`: (the target camera pose
+    (4, 4) world, the hand's X in the home camera frame, None or the failed check before the
+    motion check: "ik", "joint_limits", "collision", "press", or "path_" + the servo
+    prediction's reason; the predicted motion, :class:`pipeline.servo.predict.ServoMotion`, or
+    None when not predicted)."""
+    obstacle_ids, ignore_body_ids, bin_ids = bodies
+    centre_cam = surface_cam[0]
+    x_rot = rotate_about(x_axis_cam, normal_cam, rot)
+    grasp = T_world_cam @ target_camera_pose(
+        centre_cam,
+        normal_cam,
+        x_rot,
+        pattern,
+        standoff=float(hand_cfg.standoff),
+        cup_offset=float(hand_cfg.cup_offset),
+    )
+    res = robot.solve_ik(
+        grasp, seed_q=home, obstacle_ids=obstacle_ids, ignore_body_ids=ignore_body_ids
+    )
+    reason, motion = res.reason, None
+    if reason is None:
+        reason = press_reason(robot, grasp, res.q, hand_cfg, cfg, bin_ids)
+    if reason is None and with_path:
+        motion = _predicted_motion(
+            robot, cfg, home, T_world_cam, surface_cam, x_rot, grasp[:3, 0], pattern, intrinsics
+        )
+        if motion.reason is not None:
+            reason = "path_" + motion.reason
+    return grasp, x_rot, reason, motion
 
 
 def press_reason(
@@ -168,7 +202,7 @@ def press_reason(
     return "press" if hits else None
 
 
-def _path_reason(
+def _predicted_motion(
     robot: Robot,
     cfg,
     home: np.ndarray,
@@ -178,15 +212,12 @@ def _path_reason(
     x_world: np.ndarray,
     pattern: str,
     intrinsics,
-    path_cfg: PathCheckConfig,
-    bodies: tuple[Sequence[int], Sequence[int], Sequence[int]],
-) -> tuple[str | None, list]:
-    """(None when the servo from home, predicted on the exact surface, converges and its motion
-    passes, else "path_" + the servo's or the motion check's reason; the predicted camera
-    poses). ``surface_cam``: :func:`check_grasp`'s (centre, normal, long axis, short axis),
-    (3,) each, home camera frame, m; ``x_cam`` (home camera frame) and ``x_world`` the hand's
-    X axis of the rotation checked; ``bodies``: :func:`check_grasp`'s (obstacle_ids,
-    ignore_body_ids, bin_ids)."""
+):
+    """The servo from home, predicted on the exact surface
+    (:class:`pipeline.servo.predict.ServoMotion`: its joints, camera poses and reason, None when
+    it converges). ``surface_cam``: :func:`check_grasp`'s (centre, normal, long axis, short
+    axis), (3,) each, home camera frame, m; ``x_cam`` (home camera frame) and ``x_world`` the
+    hand's X axis of the rotation checked."""
     centre_cam, normal_cam, long_cam, short_cam = surface_cam
     servo = servo_config(cfg)
     goal, _ = first_goal(
@@ -195,7 +226,7 @@ def _path_reason(
     goals = [servo] if goal is servo else [goal, servo]
     dt = 1.0 / float(cfg.servo.control_rate_hz)
     R, t = T_world_cam[:3, :3], T_world_cam[:3, 3]
-    motion = servo_motion(
+    return servo_motion(
         robot,
         home,
         R @ centre_cam + t,
@@ -210,7 +241,3 @@ def _path_reason(
         float(cfg.motion.max_joint_speed),
         x_world,
     )
-    if motion.reason is not None:
-        return "path_" + motion.reason, motion.poses
-    path = check_motion(robot, motion.q, motion.poses, path_cfg, *bodies)
-    return (None if path.ok else "path_" + path.reason), motion.poses

@@ -345,16 +345,19 @@ class Robot:
         return best
 
     def _seeds(self, seed_q: Sequence[float] | None):
-        """``seed_q`` (if given), the home pose, then ``ik_restarts`` fixed perturbations of it.
+        """``seed_q`` (if given), the home pose (unless ``seed_q`` is it), then ``ik_restarts``
+        fixed perturbations of the home pose.
 
         A generator, so a target solved from the first seed costs nothing extra. The
         perturbations come from a fixed generator: the same target always gets the same seeds
         (reproducible labels).
         """
         home = self.home_q()
-        if seed_q is not None:
-            yield np.asarray(seed_q, dtype=np.float64)
-        yield home
+        seed = None if seed_q is None else np.asarray(seed_q, dtype=np.float64)
+        if seed is not None:
+            yield seed
+        if seed is None or not np.array_equal(seed, home):  # a seed twice: the same answer
+            yield home
         if self._restart_offsets is None:
             rng = np.random.default_rng(0)
             self._restart_offsets = rng.normal(

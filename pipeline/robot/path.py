@@ -49,6 +49,8 @@ class PathResult:
         index: the control period whose step failed (the number of steps when ok).
         samples: how many joint vectors were checked.
         collisions: the contacts at the failing sample.
+        padded: the contacts are with the padded bodies (the bin, at the clearance), not with
+            the other obstacles or the robot itself: a smaller clearance may pass.
     """
 
     ok: bool
@@ -56,6 +58,7 @@ class PathResult:
     index: int
     samples: int
     collisions: list = field(default_factory=list)
+    padded: bool = False
 
 
 def _angle_deg(R_a: np.ndarray, R_b: np.ndarray) -> float:
@@ -100,12 +103,14 @@ def check_motion(
                 qk = q[i] + (k / n) * (q[i + 1] - q[i])
                 count += 1
                 hits = robot.in_collision(qk, plain, ignore_body_ids)
-                if padded and not hits:  # the robot is at qk already
+                if hits:
+                    return PathResult(False, "collision", i, count, list(hits))
+                if padded:  # the robot is at qk already
                     hits = robot.in_collision(
                         None, padded, ignore_body_ids, margin=margin, self_collision=False
                     )
-                if hits:
-                    return PathResult(False, "collision", i, count, list(hits))
+                    if hits:
+                        return PathResult(False, "collision", i, count, list(hits), padded=True)
     return PathResult(True, None, len(q) - 1, count)
 
 
