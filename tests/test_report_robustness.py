@@ -241,12 +241,12 @@ def test_table1_percentages(info) -> None:
     t = robustness_table1_table(info)
     assert t.headers[:6] == ["network", "input", "Top 1", "Top 1 %", "Top 5 %", "Top 10 %"]
     assert _md_rows(t) == [
-        ["clean-trained", "ideal", "50.00 %", "25.00 %", "12.50 %", "—", "676", "4"],
-        ["noisy-trained", "sensor+fill_median", "100.00 %", "0.00 %", "—", "33.33 %", "600", "4"],
+        ["network under test", "ideal", "50.00 %", "25.00 %", "12.50 %", "—", "676", "4"],
+        ["sensor-trained", "sensor+fill_median", "100.00 %", "0.00 %", "—", "33.33 %", "600", "4"],
     ]
     assert _csv_rows(t) == [
-        ["clean-trained", "ideal", "50.0000", "25.0000", "12.5000", "", "676", "4"],
-        ["noisy-trained", "sensor+fill_median", "100.0000", "0.0000", "", "33.3333", "600", "4"],
+        ["network under test", "ideal", "50.0000", "25.0000", "12.5000", "", "676", "4"],
+        ["sensor-trained", "sensor+fill_median", "100.0000", "0.0000", "", "33.3333", "600", "4"],
     ]
 
 
@@ -261,10 +261,10 @@ def test_table2_percentages(info) -> None:
         "median distance (px)",
     ]
     assert _md_rows(t) == [
-        ["ours (DCNN), clean-trained", "ideal", "4", "75.00 %", "1", "12.3"],
+        ["ours (DCNN), network under test", "ideal", "4", "75.00 %", "1", "12.3"],
         ["Dex-Net-style GQ-CNN + CEM", "sensor", "4", "0.00 %", "4", "—"],
     ]
-    assert _csv_rows(t)[0] == ["ours (DCNN), clean-trained", "ideal", "4", "75.0000", "1", "12.345"]
+    assert _csv_rows(t)[0] == ["ours (DCNN), network under test", "ideal", "4", "75.0000", "1", "12.345"]
     assert _csv_rows(t)[1][-1] == ""
 
 
@@ -299,7 +299,7 @@ def test_closed_loop_sensor_rows(info) -> None:
     # 8/10 = 80.0 % (49.0–94.3); 8/12 = 66.7 % (39.1–86.2); 2 no seal; its trial: no grasp
     assert md[0] == [
         "clean_ideal",
-        "clean-trained",
+        "network under test",
         "-",
         "dev",
         "1",
@@ -326,7 +326,7 @@ def test_closed_loop_sensor_rows(info) -> None:
     # the headline row on the test split: 21/22 = 95.5 % (78.2–99.2), 21/24 = 87.5 % (69.0–95.7)
     assert md[2][:10] == [
         "noisy_sensor_test",
-        "clean-trained",
+        "network under test",
         "x.noisy_sensor_test=1",
         "test",
         "2",
@@ -340,7 +340,7 @@ def test_closed_loop_sensor_rows(info) -> None:
     rows = _csv_rows(t)
     assert rows[0][:14] == [
         "clean_ideal",
-        "clean-trained",
+        "network under test",
         "-",
         "dev",
         "1",
@@ -371,7 +371,7 @@ def test_an_old_study_still_renders(tmp_path: Path) -> None:
     md = _md_rows(robustness_closed_loop_table(old))
     assert md[0] == [
         "clean_ideal",
-        "clean-trained",
+        "network under test",
         "-",
         "—",
         "—",
@@ -490,7 +490,7 @@ def test_section_text(info) -> None:
     assert "A variant with no attempt says why in its last column" in text
     assert "No depth figure: missing." in text and ROBUSTNESS_NOT_RUN not in text
     assert (
-        "| height_tiebreak | clean-trained | x.height_tiebreak=1 | dev | 1 | 90.0 % (59.6–98.2) |"
+        "| height_tiebreak | network under test | x.height_tiebreak=1 | dev | 1 | 90.0 % (59.6–98.2) |"
     ) in text
     figure = "figures/robustness_depth.png"
     assert f"]({figure})" in "\n".join(render_robustness(info, tables, figure))

@@ -50,10 +50,10 @@ ROBUSTNESS_NOT_RUN = (
 ROBUSTNESS_KEYS = ("table1", "table2", "closed_loop", "sensor", "artifacts")
 ROBUSTNESS_FIGURE = "figures/robustness_depth.png"
 ROBUSTNESS_FIGURE_FILTER = "fill_median"  # conf/depth_filter/<name>.yaml, the figure's 3rd panel
-MODEL_LABELS = {"clean": "clean-trained", "noisy": "noisy-trained"}
+MODEL_LABELS = {"clean": "network under test", "noisy": "sensor-trained"}
 ROBUSTNESS_PLANNERS = {
-    "dcnn_clean": "ours (DCNN), clean-trained",
-    "dcnn_noisy": "ours (DCNN), noisy-trained",
+    "dcnn_clean": "ours (DCNN), network under test",
+    "dcnn_noisy": "ours (DCNN), sensor-trained",
     "gqcnn": "Dex-Net-style GQ-CNN + CEM",
     "planarity": "Dex-Net-style planarity + CEM",
 }
@@ -447,8 +447,8 @@ def _intro(info: RobustnessInfo, sensor: str) -> str:
         "the method on "
         f"depth from the `{sensor}` sensor model instead of the ideal rendered depth, with "
         + (
-            f"the network under test (*clean-trained*, train artifact `{arts.get('train_clean')}`)"
-            f" and one trained on the sensor's depth (*noisy-trained*, "
+            f"the network under test (*network under test*, train artifact `{arts.get('train_clean')}`)"
+            f" and one trained on the sensor's depth (*sensor-trained*, "
             f"`{arts.get('train_noisy')}`)"
             if arts.get("train_noisy")
             else f"the network under test alone (train artifact `{arts.get('train_clean')}`; no "
