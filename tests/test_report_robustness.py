@@ -264,7 +264,14 @@ def test_table2_percentages(info) -> None:
         ["ours (DCNN), network under test", "ideal", "4", "75.00 %", "1", "12.3"],
         ["Dex-Net-style GQ-CNN + CEM", "sensor", "4", "0.00 %", "4", "—"],
     ]
-    assert _csv_rows(t)[0] == ["ours (DCNN), network under test", "ideal", "4", "75.0000", "1", "12.345"]
+    assert _csv_rows(t)[0] == [
+        "ours (DCNN), network under test",
+        "ideal",
+        "4",
+        "75.0000",
+        "1",
+        "12.345",
+    ]
     assert _csv_rows(t)[1][-1] == ""
 
 
@@ -490,7 +497,8 @@ def test_section_text(info) -> None:
     assert "A variant with no attempt says why in its last column" in text
     assert "No depth figure: missing." in text and ROBUSTNESS_NOT_RUN not in text
     assert (
-        "| height_tiebreak | network under test | x.height_tiebreak=1 | dev | 1 | 90.0 % (59.6–98.2) |"
+        "| height_tiebreak | network under test | x.height_tiebreak=1 | dev | 1 "
+        "| 90.0 % (59.6–98.2) |"
     ) in text
     figure = "figures/robustness_depth.png"
     assert f"]({figure})" in "\n".join(render_robustness(info, tables, figure))

@@ -447,7 +447,7 @@ def _intro(info: RobustnessInfo, sensor: str) -> str:
         "the method on "
         f"depth from the `{sensor}` sensor model instead of the ideal rendered depth, with "
         + (
-            f"the network under test (*network under test*, train artifact `{arts.get('train_clean')}`)"
+            f"the network under test (train artifact `{arts.get('train_clean')}`)"
             f" and one trained on the sensor's depth (*sensor-trained*, "
             f"`{arts.get('train_noisy')}`)"
             if arts.get("train_noisy")

@@ -21,9 +21,9 @@ the paper's proposed fixes of its failure cases (Sec. 8.4). With the command's o
 
 then measures, on the noisy generation's test split (the same heaps as the clean one):
 
-* **Table 1** (``pipeline.planner.evaluate``) for the network under test and the sensor-trained one, with
-  each input of ``robustness.table1_inputs``: ``ideal`` depth, the sensor's depth, and the
-  sensor's depth after each ``depth_filter`` preprocessing;
+* **Table 1** (``pipeline.planner.evaluate``) for the network under test and the
+  sensor-trained one, with each input of ``robustness.table1_inputs``: ``ideal`` depth, the
+  sensor's depth, and the sensor's depth after each ``depth_filter`` preprocessing;
 * **Table 2** (``pipeline.stages.baseline``'s measure: G_opt within 30 px of a true face centre) for
   both networks and the Dex-Net-style planners, with the inputs of ``robustness.table2_inputs``;
 * the **closed loop** (``pipeline.stages.evaluate``, DCNN only) for each variant of
