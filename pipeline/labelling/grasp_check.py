@@ -110,7 +110,7 @@ def check_grasp(
     surface_cam = (centre_cam, normal_cam, long_cam, short_cam)
     bodies = (obstacle_ids, ignore_body_ids, bin_ids)
     rotations = hand_rotations(pattern, hand_cfg.rotations_deg)
-    # per rotation: (grasp pose, x_rot, the reason before the motion check or None, the motion)
+    # per rotation: (grasp pose, the reason before the motion check or None, the motion)
     found: dict[int, tuple] = {}
     # per rotation: the reason of a motion check that failed on the obstacles, not the bin
     blocked: dict[int, str] = {}
@@ -123,11 +123,12 @@ def check_grasp(
             first = None
             for i, rot in enumerate(rotations):
                 if i not in found:
+                    x_rot = rotate_about(x_axis_cam, normal_cam, rot)
                     found[i] = _pose_and_motion(
-                        robot, cfg, hand_cfg, home, T_world_cam, surface_cam, x_axis_cam,
-                        normal_cam, rot, pattern, intrinsics, path_cfg is not None, bodies,
+                        robot, cfg, hand_cfg, home, T_world_cam, surface_cam, x_rot, pattern,
+                        intrinsics, path_cfg is not None, bodies,
                     )  # fmt: skip
-                grasp, _, reason, motion = found[i]
+                grasp, reason, motion = found[i]
                 poses = None if motion is None else motion.poses
                 if reason is None and path_cfg is not None:
                     reason = blocked.get(i)
@@ -146,17 +147,16 @@ def check_grasp(
 
 
 def _pose_and_motion(
-    robot, cfg, hand_cfg, home, T_world_cam, surface_cam, x_axis_cam, normal_cam, rot, pattern,
-    intrinsics, with_path, bodies,
+    robot, cfg, hand_cfg, home, T_world_cam, surface_cam, x_rot, pattern, intrinsics, with_path,
+    bodies,
 ):  # fmt: skip
-    """For one hand rotation ``rot`` (degrees) of :func:`check_grasp`: (the target camera pose
-    (4, 4) world, the hand's X in the home camera frame, None or the failed check before the
-    motion check: "ik", "joint_limits", "collision", "press", or "path_" + the servo
-    prediction's reason; the predicted motion, :class:`pipeline.servo.predict.ServoMotion`, or
-    None when not predicted)."""
+    """For one hand rotation of :func:`check_grasp`, the hand's X ``x_rot`` (home camera
+    frame): (the target camera pose (4, 4) world, None or the failed check before the motion
+    check: "ik", "joint_limits", "collision", "press", or "path_" + the servo prediction's
+    reason; the predicted motion, :class:`pipeline.servo.predict.ServoMotion`, or None when
+    not predicted)."""
     obstacle_ids, ignore_body_ids, bin_ids = bodies
-    centre_cam = surface_cam[0]
-    x_rot = rotate_about(x_axis_cam, normal_cam, rot)
+    centre_cam, normal_cam = surface_cam[0], surface_cam[1]
     grasp = T_world_cam @ target_camera_pose(
         centre_cam,
         normal_cam,
@@ -177,7 +177,7 @@ def _pose_and_motion(
         )
         if motion.reason is not None:
             reason = "path_" + motion.reason
-    return grasp, x_rot, reason, motion
+    return grasp, reason, motion
 
 
 def press_reason(
