@@ -445,8 +445,10 @@ def render_evaluate(
     ]
     if "table3_drops_by_mass" in tables:
         out += [
-            f"How often the pattern each planner chose dropped a box that it had held at first, "
-            f"by box mass (mass = density × volume; {split} trials):",
+            f"How often the pattern executed dropped a box that it had held at first, by box "
+            f"mass (mass = density × volume; {split} trials) and by the pattern the planner "
+            f"chose (a single cup planned as B is the execution's fallback, "
+            f"evaluate.single_cup_fallback; point: a single suction point):",
             "",
             tables["table3_drops_by_mass"].markdown(),
         ]

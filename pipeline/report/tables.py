@@ -290,12 +290,14 @@ def trial_columns(pph_header: str = "PPH (motion only)") -> list[Column]:
 
 def drops_table(name: str, rows: list[dict]) -> Table:
     """How often each pattern dropped a box, by box mass (``drops_by_mass`` rows of an
-    evaluation: planner, box, mass, pattern, held, dropped, drop rate with its 95 % interval)."""
+    evaluation: planner, box, mass, pattern executed, pattern planned, held, dropped, drop rate
+    with its 95 % interval)."""
     columns = [
         text_column("planner", "planner"),
         text_column("box", "box"),
         Column("mass (kg)", lambda r: number(r.get("mass_kg")), "{:.3f}"),
         text_column("pattern", "pattern"),
+        text_column("planned", "planned"),
         count_column("held at first", "held"),
         count_column("dropped", "dropped"),
         rate_column("drop rate", "drop"),

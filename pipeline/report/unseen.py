@@ -159,8 +159,10 @@ def render_unseen(info: UnseenInfo, tables: dict[str, Table]) -> list[str]:
             "each with its Wilson 95 % interval.",
             "",
             tables["unseen_closed_loop"].markdown(),
-            "How often the pattern each planner chose dropped a box that it had held at "
-            "first, by box mass (mass = density × volume):",
+            "How often the pattern executed dropped a box that it had held at first, by box "
+            "mass (mass = density × volume) and by the pattern the planner chose (a single "
+            "cup planned as B is the execution's fallback, evaluate.single_cup_fallback; "
+            "point: a single suction point):",
             "",
             tables["unseen_drops_by_mass"].markdown(),
             "CSV versions: [tables/unseen_closed_loop.csv](tables/unseen_closed_loop.csv), "

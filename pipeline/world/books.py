@@ -149,13 +149,18 @@ def finite(value):
 
 
 def drops_by_mass(trials: list[dict], boxes_cfg) -> list[dict]:
-    """How often the chosen pattern dropped a box, per planner, box type (by mass) and pattern,
-    from trial records (``trials.json``: each attempt's ``target_type``, ``pattern`` and
-    ``outcome``; the box under G_opt at home, the books' knowledge).
+    """How often the chosen pattern dropped a box, per planner, box type (by mass), pattern and
+    planned pattern, from trial records (``trials.json``: each attempt's ``target_type``,
+    ``pattern``, ``planned_pattern`` and ``outcome``; the box under G_opt at home, the books'
+    knowledge).
 
     A box type's mass is ``boxes_cfg.density`` × its volume (kg). An attempt that held its box
     (success, or a drop) counts in ``held``: drops / held is how often the pattern, once sealed,
-    failed to hold. Rows sorted by planner, then mass, then pattern (L, R, B)."""
+    failed to hold. ``planned`` is the planner's pattern ("point" for a single suction point),
+    so that a single cup the planner chose and one the execution fell back on from a B
+    (``evaluate.single_cup_fallback``) count apart; a record without it (written before the
+    field existed) counts as planned as executed. Rows sorted by planner, then mass, then
+    pattern (L, R, B), then planned pattern (L, R, B, point)."""
     mass = {str(t.name): float(boxes_cfg.density) * float(np.prod(t.size)) for t in boxes_cfg.types}
     counts: dict[tuple, list[int]] = {}
     for tr in trials:
@@ -163,13 +168,15 @@ def drops_by_mass(trials: list[dict], boxes_cfg) -> list[dict]:
             kind = a.get("target_type") or ""
             if kind not in mass or a["outcome"] not in ("success", "dropped"):
                 continue
-            c = counts.setdefault((tr["planner"], kind, a["pattern"]), [0, 0])
+            planned = a.get("planned_pattern", a["pattern"]) or "point"
+            c = counts.setdefault((tr["planner"], kind, a["pattern"], planned), [0, 0])
             c[0] += 1
             c[1] += a["outcome"] == "dropped"
-    order = {"L": 0, "R": 1, "B": 2}
+    order = {"L": 0, "R": 1, "B": 2, "point": 3}
     rows = []
-    for (planner, kind, pattern), (held, dropped) in sorted(
-        counts.items(), key=lambda kv: (kv[0][0], mass[kv[0][1]], order.get(kv[0][2], 3))
+    for (planner, kind, pattern, planned), (held, dropped) in sorted(
+        counts.items(),
+        key=lambda kv: (kv[0][0], mass[kv[0][1]], order.get(kv[0][2], 4), order.get(kv[0][3], 4)),
     ):
         lo, hi = wilson_interval(dropped, held)
         rows.append(
@@ -178,6 +185,7 @@ def drops_by_mass(trials: list[dict], boxes_cfg) -> list[dict]:
                 "box": kind,
                 "mass_kg": round(mass[kind], 3),
                 "pattern": pattern,
+                "planned": planned,
                 "held": held,
                 "dropped": dropped,
                 "drop_rate": round(dropped / held, 6) if held else float("nan"),

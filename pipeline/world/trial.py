@@ -61,7 +61,7 @@ class Attempt:
     trial: int
     index: int
     planner: str
-    pattern: str
+    pattern: str  # the cups executed: "L", "R" or "B"
     g_opt: list  # [u, v] at home
     target_body: int  # body under G_opt at home (−1: none); the world's books only
     target_type: str
@@ -80,6 +80,10 @@ class Attempt:
     lost_reason: str = ""  # the descriptor's reason when the target was lost
     face_split: bool = False  # the servo's region was split at other planner points (face_split_m)
     second_tier: bool = False  # a DCNN candidate of the fallback tier (dcnn_fallback_ratio)
+    # the planner's pattern ("L", "R", "B"; "" for a single suction point): it differs from
+    # ``pattern`` when the execution fell back from a B to one cup (evaluate.single_cup_fallback)
+    # or chose the cup for a single point (evaluate.dexnet_pattern)
+    planned_pattern: str = ""
     # m: farthest the executed camera came from the servo path the run-time check predicted
     # (robot.path_check; None without a prediction)
     path_deviation_m: float | None = None
@@ -267,6 +271,7 @@ class TrialRunner:
             planning_s=plan.planning_s,
             face_split=plan.sites_world is not None,
             second_tier=bool(g.second_tier),
+            planned_pattern=g.pattern or "",
         )
         servo = self.robot_side.servo(plan)
         executed = [robot.camera_pose()[:3, 3]]
