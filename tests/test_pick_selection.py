@@ -332,6 +332,53 @@ def test_a_b_that_does_not_fit_is_tried_with_one_cup(cube_runner):
     assert result.plan is None and result.rejected == {"hand_fit": 1}
 
 
+def test_a_b_falls_back_to_one_cup_last_when_asked(cube_runner):
+    """``evaluate.single_cup_fallback_order``. The cube's B does not fit (above) and a second
+    candidate, an L at the same point, does. at_once: the B candidate is executed with L before
+    the second candidate is looked at; last: the second candidate's own L comes first, and the
+    B's single cups only after every candidate's own pattern."""
+    runner = cube_runner
+    obs = _home(runner)
+    b = _grasp(obs, [0, 0, 0.07])
+    single = Grasp(b.u, b.v, "L")
+    point = Grasp(b.u, b.v, None)  # a single suction point: both cups are its own
+    side = runner.robot_side
+    assert runner.cfg.evaluate.single_cup_fallback_order == "at_once"  # the default
+    assert side.order([b, single, point]) == [
+        (0, "B"),
+        (0, "L"),
+        (0, "R"),
+        (1, "L"),
+        (2, "L"),
+        (2, "R"),
+    ]
+    plan = _select(runner, obs, [b, single]).plan
+    assert plan.grasp is b and plan.pattern == "L"
+    runner.cfg.evaluate.single_cup_fallback_order = "last"
+    assert side.order([b, single, point]) == [
+        (0, "B"),
+        (1, "L"),
+        (2, "L"),
+        (2, "R"),
+        (0, "L"),
+        (0, "R"),
+    ]
+    plan = _select(runner, obs, [b, single]).plan
+    assert plan.grasp is single and plan.pattern == "L"
+    result = _select(runner, obs, [b])  # the B alone still falls back
+    assert result.plan.grasp is b and result.plan.pattern == "L"
+    runner.cfg.evaluate.single_cup_fallback = False  # no fallback: the order has none to move
+    assert side.order([b, single]) == [(0, "B"), (1, "L")]
+
+
+def test_an_unknown_fallback_order_is_refused(smoke_cfg):
+    from pipeline.controller.picker import RobotController
+
+    cfg = smoke_cfg("evaluate", "evaluate.single_cup_fallback_order=later")
+    with pytest.raises(ValueError, match="single_cup_fallback_order is 'later': choose from"):
+        RobotController(cfg, planner=None, name="test")
+
+
 def test_dexnet_alternatives_follow_the_best_by_quality():
     """``grasps_of``: the best, then the final set's others by score (ties in sampling order),
     skipping -inf and the best's pixel and repeated pixels."""

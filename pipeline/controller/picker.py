@@ -15,10 +15,12 @@ objects and gives back plans and joint commands. It never sees the simulated wor
    cups' area are dropped;
 3. the first ``evaluate.max_candidates_checked`` grasps in rank order, each with its patterns
    in order of preference (the planner's; with ``evaluate.single_cup_fallback`` a B is
-   followed by L, then R; a single suction point is served by ``evaluate.dexnet_pattern``'s
-   cup, then the other): skipped when it repeats a failed plan (the retry memory); with
-   ``evaluate.check_reachability`` (default) executed only when the descriptor finds a surface
-   at it and the run-time check passes. The first that does is the plan; none: no grasp.
+   followed by L, then R, right after it or, with ``evaluate.single_cup_fallback_order:
+   last``, after every grasp's own pattern; a single suction point is served by
+   ``evaluate.dexnet_pattern``'s cup, then the other): skipped when it repeats a failed plan
+   (the retry memory); with ``evaluate.check_reachability`` (default) executed only when the
+   descriptor finds a surface at it and the run-time check passes. The first that does is the
+   plan; none: no grasp.
 
 The surface checked is the one the servo will track: with ``evaluate.face_split_m`` > 0, a
 region grown at home from a patterned grasp that also holds another grasp of the planner's
@@ -43,6 +45,8 @@ from pipeline.controller.motion import Kinematics, Mover, Servo
 from pipeline.controller.observation import Observation
 from pipeline.controller.planning import Grasp, checked_grasps
 from pipeline.controller.retry import RetryMemory
+
+FALLBACK_ORDERS = ("at_once", "last")  # evaluate.single_cup_fallback_order
 
 
 @dataclass
@@ -100,6 +104,11 @@ class RobotController:
         from pipeline.servo.descriptor import descriptor_config
 
         self.cfg, self.planner, self.name = cfg, planner, name
+        order = str(cfg.evaluate.single_cup_fallback_order)
+        if order not in FALLBACK_ORDERS:
+            raise ValueError(
+                f"evaluate.single_cup_fallback_order is {order!r}: choose from {FALLBACK_ORDERS}"
+            )
         self.checker = RunTimeCheck(cfg, collision_model)
         self.robot = self.checker.robot
         self.kin = Kinematics(cfg, self.robot)
@@ -259,40 +268,50 @@ class RobotController:
         out = PlanResult(None, grasps, min(len(grasps), limit), rejected)
         if gate and grasps:
             self.checker.update(obs)
-        for grasp in grasps[:limit]:
+        surfaces: dict[int, tuple] = {}  # per grasp, found once when first needed: (feats, sites)
+        for i, pattern in self.order(grasps[:limit]):
+            grasp = grasps[i]
             point = self.point_world(obs, grasp)
             fixed = None if grasp.pattern is not None or grasp.point_cam is None else point
-            surface = None  # (feats, sites), found once per grasp when first needed
-            for pattern in self.patterns(grasp):
-                if self.memory.repeats(obs, point, pattern):
-                    rejected["repeat"] = rejected.get("repeat", 0) + 1
-                    continue
-                surface = surface or self.home_surface(obs, grasp, grasps)
-                feats, sites = surface
-                if not gate:
-                    out.plan = Plan(
-                        grasp, pattern, obs, point, sites_world=sites, fixed_point_world=fixed
-                    )
-                    return out
-                if feats is None:
-                    rejected["descriptor"] = rejected.get("descriptor", 0) + 1
-                    continue
-                centre = feats.center_cam if fixed is None else self.point_cam(obs, grasp)
-                check, reason = self.checker.check(
-                    obs,
-                    feats,
-                    centre,
-                    pattern,
-                    (grasp.u, grasp.v),
-                    hand_fit=bool(ev.check_hand_fit) and grasp.pattern is not None,
+            if self.memory.repeats(obs, point, pattern):
+                rejected["repeat"] = rejected.get("repeat", 0) + 1
+                continue
+            if i not in surfaces:
+                surfaces[i] = self.home_surface(obs, grasp, grasps)
+            feats, sites = surfaces[i]
+            if not gate:
+                out.plan = Plan(
+                    grasp, pattern, obs, point, sites_world=sites, fixed_point_world=fixed
                 )
-                if check is not None:
-                    out.plan = Plan(
-                        grasp, pattern, obs, point, check.x_world, check.path, sites, fixed
-                    )
-                    return out
-                rejected[reason] = rejected.get(reason, 0) + 1
+                return out
+            if feats is None:
+                rejected["descriptor"] = rejected.get("descriptor", 0) + 1
+                continue
+            centre = feats.center_cam if fixed is None else self.point_cam(obs, grasp)
+            check, reason = self.checker.check(
+                obs,
+                feats,
+                centre,
+                pattern,
+                (grasp.u, grasp.v),
+                hand_fit=bool(ev.check_hand_fit) and grasp.pattern is not None,
+            )
+            if check is not None:
+                out.plan = Plan(grasp, pattern, obs, point, check.x_world, check.path, sites, fixed)
+                return out
+            rejected[reason] = rejected.get(reason, 0) + 1
         return out
+
+    def order(self, grasps: list[Grasp]) -> list[tuple[int, str]]:
+        """The (index into ``grasps``, pattern) pairs the selection tries, in order (module
+        docstring, step 3): each grasp's patterns (:meth:`patterns`) right after one another,
+        or, with ``evaluate.single_cup_fallback_order: last``, a B's single cups after every
+        grasp's own pattern, in the grasps' order."""
+        pairs = [(i, p) for i, g in enumerate(grasps) for p in self.patterns(g)]
+        if str(self.cfg.evaluate.single_cup_fallback_order) == "at_once":
+            return pairs
+        own = [(i, p) for i, p in pairs if p == grasps[i].pattern or grasps[i].pattern is None]
+        return own + [pair for pair in pairs if pair not in own]
 
     # ------------------------------------------------------------------ execution
     def servo(self, plan: Plan) -> Servo:
