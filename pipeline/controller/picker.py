@@ -268,10 +268,13 @@ class RobotController:
         out = PlanResult(None, grasps, min(len(grasps), limit), rejected)
         if gate and grasps:
             self.checker.update(obs)
+        points: dict[int, np.ndarray | None] = {}  # per grasp, its point in the world, once
         surfaces: dict[int, tuple] = {}  # per grasp, found once when first needed: (feats, sites)
         for i, pattern in self.order(grasps[:limit]):
             grasp = grasps[i]
-            point = self.point_world(obs, grasp)
+            if i not in points:
+                points[i] = self.point_world(obs, grasp)
+            point = points[i]
             fixed = None if grasp.pattern is not None or grasp.point_cam is None else point
             if self.memory.repeats(obs, point, pattern):
                 rejected["repeat"] = rejected.get("repeat", 0) + 1
@@ -310,8 +313,10 @@ class RobotController:
         pairs = [(i, p) for i, g in enumerate(grasps) for p in self.patterns(g)]
         if str(self.cfg.evaluate.single_cup_fallback_order) == "at_once":
             return pairs
-        own = [(i, p) for i, p in pairs if p == grasps[i].pattern or grasps[i].pattern is None]
-        return own + [pair for pair in pairs if pair not in own]
+        own, fallback = [], []
+        for i, p in pairs:
+            (own if grasps[i].pattern in (p, None) else fallback).append((i, p))
+        return own + fallback
 
     # ------------------------------------------------------------------ execution
     def servo(self, plan: Plan) -> Servo:
