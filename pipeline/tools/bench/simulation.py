@@ -331,12 +331,15 @@ def sensor_figures(num_images: int = 20, repeats: int = 3) -> dict[str, float]:
     """The SR300 model and the depth filters on the bench's heaps: ms per 416 × 416 image
     (median over images × repeats), the fraction of pixels without data where the ideal depth
     has data, and the error against the ideal depth (median |e| and the 90th percentile of
-    |e|, mm, over the pixels with data)."""
+    |e|, mm, over the pixels with data). The incidence angles, the model's costliest step, are
+    also timed with their numpy path (``sensor_reference``), interleaved with the compiled loop
+    on the same images, with the ratio and whether both gave the same bits."""
     from omegaconf import OmegaConf
 
     from pipeline.camera.depth_filter import fill_holes, median_filter, preprocess_depth
-    from pipeline.camera.sensor import apply_sensor_model
+    from pipeline.camera.sensor import apply_sensor_model, incidence_angles
     from pipeline.runtime.cli import compose
+    from pipeline.tools.bench import sensor_reference
 
     cfg = OmegaConf.to_object(compose("generate", ["experiment=default", "sensor=sr300"]))
     filters = {
@@ -345,7 +348,14 @@ def sensor_figures(num_images: int = 20, repeats: int = 3) -> dict[str, float]:
     }
     intr = intrinsics_of(cfg)
     scenes = bench_scenes(cfg, num_images)
-    times: dict[str, list[float]] = {"sensor": [], "fill": [], "median5": []}
+    times: dict[str, list[float]] = {
+        "sensor": [],
+        "fill": [],
+        "median5": [],
+        "incidence_compiled": [],
+        "incidence_numpy": [],
+    }
+    same = True
     stats: dict[str, list[np.ndarray]] = {"sensor": [], "fill": [], "fill_median": []}
     lost: dict[str, list[float]] = {k: [] for k in stats}
     for k, sc in enumerate(scenes):
@@ -362,6 +372,14 @@ def sensor_figures(num_images: int = 20, repeats: int = 3) -> dict[str, float]:
             times["sensor"].append(t1 - t0)
             times["fill"].append(t2 - t1)
             times["median5"].append(t3 - t2)
+            t0 = time.perf_counter()
+            fast = incidence_angles(ideal, intr)
+            t1 = time.perf_counter()
+            slow = sensor_reference.incidence_angles(ideal, intr)
+            t2 = time.perf_counter()
+            times["incidence_compiled"].append(t1 - t0)
+            times["incidence_numpy"].append(t2 - t1)
+            same = same and fast.tobytes() == slow.tobytes()
         images = {
             "sensor": noisy,
             "fill": preprocess_depth(noisy, filters["fill"]),
@@ -373,6 +391,10 @@ def sensor_figures(num_images: int = 20, repeats: int = 3) -> dict[str, float]:
             ok = has & (img > 0)
             stats[name].append(np.abs(img[ok] - ideal[ok]))
     out = {f"{k}_ms_per_image": 1000 * float(np.median(v)) for k, v in times.items()}
+    out["incidence_speedup"] = out["incidence_numpy_ms_per_image"] / max(
+        out["incidence_compiled_ms_per_image"], 1e-9
+    )
+    out["incidence_same_bits"] = float(same)
     for name in stats:
         err = np.concatenate(stats[name])
         out[f"{name}_missing_fraction"] = float(np.mean(lost[name]))
@@ -385,6 +407,11 @@ def sensor_figures(num_images: int = 20, repeats: int = 3) -> dict[str, float]:
     print(
         f"  time per image: sensor model {out['sensor_ms_per_image']:.1f} ms, hole filling "
         f"{out['fill_ms_per_image']:.1f} ms, 5x5 median {out['median5_ms_per_image']:.1f} ms"
+    )
+    print(
+        f"  incidence angles: compiled {out['incidence_compiled_ms_per_image']:.2f} ms, numpy "
+        f"path {out['incidence_numpy_ms_per_image']:.1f} ms per image "
+        f"({out['incidence_speedup']:.0f}x; same bits: {bool(same)})"
     )
     for name in stats:
         print(
