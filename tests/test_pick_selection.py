@@ -371,6 +371,46 @@ def test_a_b_falls_back_to_one_cup_last_when_asked(cube_runner):
     assert side.order([b, single]) == [(0, "B"), (1, "L")]
 
 
+def test_two_cups_first_where_they_fit(runner, cube_runner):
+    """``evaluate.two_cups_first``. On the medium box's top face (145 x 92 mm) both cups fit:
+    an L of the fallback tier is executed as B under ``second_tier`` and ``all``, a first-tier L
+    only under ``all``. On the cube's 60 mm face B does not fit ("hand_fit"): the L is executed
+    as it is. The order keeps the upgrade with its own grasp when a B's single cups go last."""
+    obs = _home(runner)
+    side = runner.robot_side
+    first = _grasp(obs, [0, 0, 0.052], "L")
+    tier2 = _grasp(obs, [0, 0, 0.052], "L", second_tier=True)
+    b = _grasp(obs, [0, 0, 0.052], "B")
+    assert runner.cfg.evaluate.two_cups_first == "none"  # the stage default
+    assert side.patterns(tier2) == ["L"]
+    assert _select(runner, obs, [tier2]).plan.pattern == "L"
+    runner.cfg.evaluate.two_cups_first = "second_tier"
+    assert side.patterns(tier2) == ["B", "L"] and side.patterns(first) == ["L"]
+    assert _select(runner, obs, [tier2]).plan.pattern == "B"
+    assert _select(runner, obs, [first]).plan.pattern == "L"
+    runner.cfg.evaluate.single_cup_fallback_order = "last"
+    assert side.order([b, tier2]) == [(0, "B"), (1, "B"), (1, "L"), (0, "L"), (0, "R")]
+    runner.cfg.evaluate.two_cups_first = "all"
+    assert side.patterns(first) == ["B", "L"]
+    assert _select(runner, obs, [first]).plan.pattern == "B"
+
+    cube = cube_runner
+    cube.cfg.evaluate.two_cups_first = "all"
+    obs = _home(cube)
+    single = _grasp(obs, [0, 0, 0.07], "L")
+    assert _check(cube, obs, single, "B")[1] == "hand_fit"
+    result = _select(cube, obs, [single])
+    assert result.plan.pattern == "L" and result.rejected.get("hand_fit") == 1
+
+
+def test_an_unknown_two_cups_first_is_refused(smoke_cfg):
+    from pipeline.controller.picker import RobotController
+
+    cfg = smoke_cfg("evaluate", "evaluate.two_cups_first=always")
+    with pytest.raises(ValueError, match="two_cups_first is 'always': choose from"):
+        RobotController(cfg, planner=None, name="test")
+
+
 def test_an_unknown_fallback_order_is_refused(smoke_cfg):
     from pipeline.controller.picker import RobotController
 

@@ -16,7 +16,9 @@ objects and gives back plans and joint commands. It never sees the simulated wor
 3. the first ``evaluate.max_candidates_checked`` grasps in rank order, each with its patterns
    in order of preference (the planner's; with ``evaluate.single_cup_fallback`` a B is
    followed by L, then R, right after it or, with ``evaluate.single_cup_fallback_order:
-   last``, after every grasp's own pattern; a single suction point is served by
+   last``, after every grasp's own pattern; with ``evaluate.two_cups_first``, an L or R (of the
+   second tier, or any) is tried with both cups first, then with its own cup; a single
+   suction point is served by
    ``evaluate.dexnet_pattern``'s cup, then the other): skipped when it repeats a failed plan
    (the retry memory); with ``evaluate.check_reachability`` (default) executed only when the
    descriptor finds a surface at it and the run-time check passes. The first that does is the
@@ -47,6 +49,7 @@ from pipeline.controller.planning import Grasp, checked_grasps
 from pipeline.controller.retry import RetryMemory
 
 FALLBACK_ORDERS = ("at_once", "last")  # evaluate.single_cup_fallback_order
+TWO_CUPS_FIRST = ("none", "second_tier", "all")  # evaluate.two_cups_first
 
 
 @dataclass
@@ -109,6 +112,11 @@ class RobotController:
             raise ValueError(
                 f"evaluate.single_cup_fallback_order is {order!r}: choose from {FALLBACK_ORDERS}"
             )
+        upgrade = str(cfg.evaluate.two_cups_first)
+        if upgrade not in TWO_CUPS_FIRST:
+            raise ValueError(
+                f"evaluate.two_cups_first is {upgrade!r}: choose from {TWO_CUPS_FIRST}"
+            )
         self.checker = RunTimeCheck(cfg, collision_model)
         self.robot = self.checker.robot
         self.kin = Kinematics(cfg, self.robot)
@@ -138,6 +146,9 @@ class RobotController:
         if grasp.pattern is not None:
             if grasp.pattern == "B" and bool(self.cfg.evaluate.single_cup_fallback):
                 return ["B", "L", "R"]
+            upgrade = str(self.cfg.evaluate.two_cups_first)
+            if upgrade == "all" or (upgrade == "second_tier" and grasp.second_tier):
+                return ["B", grasp.pattern]  # both cups first where they fit
             return [grasp.pattern]
         preferred = str(self.cfg.evaluate.dexnet_pattern)
         if preferred == "B":
@@ -315,7 +326,7 @@ class RobotController:
             return pairs
         own, fallback = [], []
         for i, p in pairs:
-            (own if grasps[i].pattern in (p, None) else fallback).append((i, p))
+            (fallback if grasps[i].pattern == "B" and p != "B" else own).append((i, p))
         return own + fallback
 
     # ------------------------------------------------------------------ execution
