@@ -403,6 +403,37 @@ def test_two_cups_first_where_they_fit(runner, cube_runner):
     assert result.plan.pattern == "L" and result.rejected.get("hand_fit") == 1
 
 
+def test_b_turned_by_a_quarter_where_its_cups_fit_the_other_way(smoke_cfg):
+    """``evaluate.b_quarter_turn``. A 170 x 60 mm top face lying along the world's x axis: the
+    paper's rule makes that axis the hand's X, so B's cups (88 mm apart on the hand's Y) would
+    straddle the 60 mm side and do not fit ("hand_fit"). Off: the B falls back to one cup (L).
+    On: B with the hand turned by 90° follows B itself, before the single cups; its X is the
+    face's short axis (world y), and the servo then picks the bar with both cups."""
+    from pipeline.controller.check import pattern_fits
+
+    r = _one_box_runner(smoke_cfg, "bar", [0.17, 0.06, 0.05])
+    try:
+        obs = _home(r)
+        b = _grasp(obs, [0, 0, 0.05], "B")
+        side = r.robot_side
+        feats, _ = side.home_surface(obs, b, [b])
+        assert not pattern_fits(feats, "B", r.cfg.hand)
+        assert pattern_fits(feats, "B", r.cfg.hand, quarter_turn=True)
+        assert r.cfg.evaluate.b_quarter_turn is False  # the stage default
+        assert side.order([b]) == [(0, "B"), (0, "L"), (0, "R")]
+        assert _select(r, obs, [b]).plan.pattern == "L"
+        r.cfg.evaluate.b_quarter_turn = True
+        assert side.order([b]) == [(0, "B"), (0, "B90"), (0, "L"), (0, "R")]
+        result = _select(r, obs, [b])
+        assert result.plan.pattern == "B" and result.rejected == {"hand_fit": 1}
+        # the hand's X: the face's short axis as the descriptor measures it from depth
+        np.testing.assert_allclose(np.abs(result.plan.x_world), [0, 1, 0], atol=1e-3)
+        attempt = r.attempt(result.plan, obs, 0, 0, None)
+        assert (attempt.pattern, attempt.outcome) == ("B", "success")
+    finally:
+        _close(r)
+
+
 def test_an_unknown_two_cups_first_is_refused(smoke_cfg):
     from pipeline.controller.picker import RobotController
 
