@@ -1,5 +1,5 @@
 # Every target sets up the environment first (quick when nothing changed).
-# Stage targets take EXPERIMENT=smoke|default|one_network|paper and ARGS="<more Hydra overrides>".
+# Stage targets take EXPERIMENT=smoke|default|paper and ARGS="<more Hydra overrides>".
 SHELL := /bin/bash
 .DEFAULT_GOAL := help
 PY := .venv/bin/python
@@ -21,7 +21,7 @@ TRAIN := $(if $(filter-out 1,$(NPROC)),.venv/bin/torchrun --standalone --nproc_p
 
 help: ## List the targets
 	@grep -hE '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  make %-12s %s\n", $$1, $$2}'
-	@echo "  Variables: EXPERIMENT=smoke|default|one_network|paper (default: default), ARGS='hydra overrides', STAGE=<stage> (view, profile), NPROC=<n> (train), TEST_WORKERS=<n>|auto|0 (test, test-slow)"
+	@echo "  Variables: EXPERIMENT=smoke|default|paper (default: default), ARGS='hydra overrides', STAGE=<stage> (view, profile), NPROC=<n> (train), TEST_WORKERS=<n>|auto|0 (test, test-slow)"
 
 setup: ## Create .venv with the pinned packages and check system libraries (quick if done)
 	@bash scripts/setup.sh

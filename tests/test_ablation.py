@@ -36,10 +36,14 @@ def test_smoke_ablation_end_to_end(tmp_path):
     base = smoke_overrides(tmp_path)  # the oracle needs no upstream artifact
     dev = evaluate(compose("evaluate", base + ["planner=oracle", "evaluate.split=dev"]))
     first = evaluate(compose("evaluate", base + ["planner=oracle"]))  # as make reproduce leaves it
-    cfg = compose("ablation", base + ["ablation.planners=[oracle]"])  # the DCNN needs a network
+    cfg = compose("ablation", base)
+    # by default an execution variant runs for the DCNN alone, all_on also for the oracle
+    assert list(cfg.ablation.planners) == ["dcnn"]
+    assert list(cfg.ablation.variant_planners.all_on) == ["oracle", "dcnn"]
+    cfg.ablation.planners = ["oracle"]  # the DCNN needs a network
+    # all_on for the oracle alone; no_fallback_tier for no planner: no row
+    cfg.ablation.variant_planners = {"all_on": ["oracle"], "no_fallback_tier": []}
     by_name = {str(v.name): v for v in cfg.ablation.variants}
-    # no_fallback_tier runs for the DCNN alone (the oracle has no second tier): no row here
-    assert list(cfg.ablation.variant_planners.no_fallback_tier) == ["dcnn"]
     cfg.ablation.variants = [
         by_name["all_on"],
         by_name["no_fallback_tier"],

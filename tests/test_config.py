@@ -67,7 +67,7 @@ def test_schema_fields_have_no_defaults():
 
 @pytest.mark.parametrize("root", ROOTS)
 def test_every_stage_config_is_complete(root):
-    runs = [[f"experiment={e}"] for e in ("smoke", "default", "one_network", "paper")] + [
+    runs = [[f"experiment={e}"] for e in ("smoke", "default", "paper")] + [
         ["experiment=smoke", extra] for extra in ("sensor=sr300", "executor=ray", "planner=dcnn")
     ]
     for overrides in runs:

@@ -346,13 +346,13 @@ def test_unseen_sizes_stay_outside_every_jittered_training_type():
     permutation of its edges some edge lies outside [1 - j, 1 + j] × the type's edge."""
     import itertools
 
-    cfg = OmegaConf.to_object(compose("generate", ["experiment=default"]))
+    cfg = OmegaConf.to_object(compose("generate", ["experiment=paper"]))
     j = cfg.generate.size_jitter
     train = [np.asarray(t.size) for t in cfg.boxes.types]
     others = [
         np.asarray(t.size)
         for t in OmegaConf.to_object(
-            compose("generate", ["experiment=default", "boxes=unseen"])
+            compose("generate", ["experiment=paper", "boxes=unseen"])
         ).boxes.types
     ]
     others += [

@@ -371,6 +371,77 @@ def test_a_b_falls_back_to_one_cup_last_when_asked(cube_runner):
     assert side.order([b, single]) == [(0, "B"), (1, "L")]
 
 
+def test_two_cups_first_where_they_fit(runner, cube_runner):
+    """``evaluate.two_cups_first``. On the medium box's top face (145 x 92 mm) both cups fit:
+    an L of the fallback tier is executed as B under ``second_tier`` and ``all``, a first-tier L
+    only under ``all``. On the cube's 60 mm face B does not fit ("hand_fit"): the L is executed
+    as it is. The order keeps the upgrade with its own grasp when a B's single cups go last."""
+    obs = _home(runner)
+    side = runner.robot_side
+    first = _grasp(obs, [0, 0, 0.052], "L")
+    tier2 = _grasp(obs, [0, 0, 0.052], "L", second_tier=True)
+    b = _grasp(obs, [0, 0, 0.052], "B")
+    assert runner.cfg.evaluate.two_cups_first == "none"  # the stage default
+    assert side.patterns(tier2) == ["L"]
+    assert _select(runner, obs, [tier2]).plan.pattern == "L"
+    runner.cfg.evaluate.two_cups_first = "second_tier"
+    assert side.patterns(tier2) == ["B", "L"] and side.patterns(first) == ["L"]
+    assert _select(runner, obs, [tier2]).plan.pattern == "B"
+    assert _select(runner, obs, [first]).plan.pattern == "L"
+    runner.cfg.evaluate.single_cup_fallback_order = "last"
+    assert side.order([b, tier2]) == [(0, "B"), (1, "B"), (1, "L"), (0, "L"), (0, "R")]
+    runner.cfg.evaluate.two_cups_first = "all"
+    assert side.patterns(first) == ["B", "L"]
+    assert _select(runner, obs, [first]).plan.pattern == "B"
+
+    cube = cube_runner
+    cube.cfg.evaluate.two_cups_first = "all"
+    obs = _home(cube)
+    single = _grasp(obs, [0, 0, 0.07], "L")
+    assert _check(cube, obs, single, "B")[1] == "hand_fit"
+    result = _select(cube, obs, [single])
+    assert result.plan.pattern == "L" and result.rejected.get("hand_fit") == 1
+
+
+def test_b_turned_by_a_quarter_where_its_cups_fit_the_other_way(smoke_cfg):
+    """``evaluate.b_quarter_turn``. A 170 x 60 mm top face lying along the world's x axis: the
+    paper's rule makes that axis the hand's X, so B's cups (88 mm apart on the hand's Y) would
+    straddle the 60 mm side and do not fit ("hand_fit"). Off: the B falls back to one cup (L).
+    On: B with the hand turned by 90° follows B itself, before the single cups; its X is the
+    face's short axis (world y), and the servo then picks the bar with both cups."""
+    from pipeline.controller.check import pattern_fits
+
+    r = _one_box_runner(smoke_cfg, "bar", [0.17, 0.06, 0.05])
+    try:
+        obs = _home(r)
+        b = _grasp(obs, [0, 0, 0.05], "B")
+        side = r.robot_side
+        feats, _ = side.home_surface(obs, b, [b])
+        assert not pattern_fits(feats, "B", r.cfg.hand)
+        assert pattern_fits(feats, "B", r.cfg.hand, quarter_turn=True)
+        assert r.cfg.evaluate.b_quarter_turn is False  # the stage default
+        assert side.order([b]) == [(0, "B"), (0, "L"), (0, "R")]
+        assert _select(r, obs, [b]).plan.pattern == "L"
+        r.cfg.evaluate.b_quarter_turn = True
+        assert side.order([b]) == [(0, "B"), (0, "B90"), (0, "L"), (0, "R")]
+        result = _select(r, obs, [b])
+        assert result.plan.pattern == "B" and result.rejected == {"hand_fit": 1}
+        # the hand's X: the face's short axis as the descriptor measures it from depth
+        np.testing.assert_allclose(np.abs(result.plan.x_world), [0, 1, 0], atol=1e-3)
+        attempt = r.attempt(result.plan, obs, 0, 0, None)
+        assert (attempt.pattern, attempt.outcome) == ("B", "success")
+    finally:
+        _close(r)
+
+
+def test_an_unknown_two_cups_first_is_refused(smoke_cfg):
+    from pipeline.controller.picker import RobotController
+
+    cfg = smoke_cfg("evaluate", "evaluate.two_cups_first=always")
+    with pytest.raises(ValueError, match="two_cups_first is 'always': choose from"):
+        RobotController(cfg, planner=None, name="test")
+
+
 def test_an_unknown_fallback_order_is_refused(smoke_cfg):
     from pipeline.controller.picker import RobotController
 

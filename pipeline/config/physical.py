@@ -104,6 +104,7 @@ class ObjectsConfig:
     lateral_friction: float = MISSING
     min_count: int = MISSING  # objects per heap, uniform, inclusive
     max_count: int = MISSING
+    solver_iterations: int = MISSING  # pybullet's per step while an object heap settles
 
 
 @dataclass

@@ -227,6 +227,8 @@ class EvaluateConfig:
     check_hand_fit: bool = MISSING  # the run-time check tests the pattern's cups on the surface
     single_cup_fallback: bool = MISSING  # a rejected B is tried with L, then R
     single_cup_fallback_order: str = MISSING  # at_once: right after the B; last: after all grasps
+    two_cups_first: str = MISSING  # none | second_tier | all: an L or R tried with B first
+    b_quarter_turn: bool = MISSING  # a B is also tried with the hand turned by 90°
     min_area_ratio: float = MISSING  # 0: off (paper); 1.2: Sec. 8.4's surface-area safety check
     label_no_grasp: bool = MISSING  # a "no grasp" end also asks the labels on that frame
     train_version: str = MISSING

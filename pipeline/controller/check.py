@@ -135,7 +135,15 @@ def paper_x_axis(feats) -> np.ndarray:
     return np.asarray(axis if warped[0] >= 0 else -axis, np.float64)
 
 
-def pattern_fits(feats, pattern: str, hand_cfg) -> bool:
+def quarter_turned_x_axis(feats) -> np.ndarray:
+    """The hand's X turned by a quarter from the paper's rule (camera frame): the other surface
+    axis of :func:`paper_x_axis`, signed towards +X of its warped view."""
+    axes = [(feats.long_axis_cam, feats.warped_long), (feats.short_axis_cam, feats.warped_short)]
+    axis, warped = axes[1 - int(np.argmax([abs(w[0]) for _, w in axes]))]
+    return np.asarray(axis if warped[0] >= 0 else -axis, np.float64)
+
+
+def pattern_fits(feats, pattern: str, hand_cfg, quarter_turn: bool = False) -> bool:
     """Whether ``pattern``'s active cups lie on the descriptor's surface ``feats``: the
     labelling stage's hand-level rule (``pipeline.grasping.hand.cup_fits``: each cup disc
     inside the surface rectangle, the area at least ``min_area_ratio`` × the active cups' area)
@@ -143,8 +151,9 @@ def pattern_fits(feats, pattern: str, hand_cfg) -> bool:
     X by the paper's rule (``paper_x_axis``) and the cups on its Y, at ±``cup_offset`` for B and
     the one active cup on the centre for L and R. Turning the hand by 90°
     (``hand.rotations_deg``) leaves a single cup's fit unchanged, and B takes only 0 and 180°,
-    so the paper's axis decides."""
-    x_is_long = abs(feats.warped_long[0]) >= abs(feats.warped_short[0])  # as paper_x_axis
+    so the paper's axis decides; with ``quarter_turn`` the hand's X is the other axis
+    (:func:`quarter_turned_x_axis`), and B's cups lie along the paper's X."""
+    x_is_long = (abs(feats.warped_long[0]) >= abs(feats.warped_short[0])) != quarter_turn
     half_x, half_y = (
         (feats.long_length / 2, feats.short_length / 2)
         if x_is_long
@@ -197,13 +206,17 @@ class RunTimeCheck:
         pattern: str,
         uv: tuple[float, float],
         hand_fit: bool,
+        quarter_turn: bool = False,
     ) -> tuple[GraspCheck | None, str | None]:
         """(the passing check, None), or (None, the reason) for a grasp with ``pattern`` whose
         active cup goes on ``centre_cam`` (home camera, metres) on the descriptor's surface
         ``feats`` at pixel ``uv`` of the home observation ``obs``: "hand_fit" with
-        ``hand_fit`` when the cups do not fit, else the failed check of ``check_grasp``."""
+        ``hand_fit`` when the cups do not fit, else the failed check of ``check_grasp``. With
+        ``quarter_turn`` the hand's X is turned by 90° from the paper's rule
+        (:func:`quarter_turned_x_axis`); the passing check's ``x_world`` carries it to the
+        servo."""
         cfg = self.cfg
-        if hand_fit and not pattern_fits(feats, pattern, cfg.hand):
+        if hand_fit and not pattern_fits(feats, pattern, cfg.hand, quarter_turn):
             return None, "hand_fit"
         with self.heap.excluding(obs, uv, feats.region) as (obstacles, ignore):
             check = check_grasp(
@@ -215,7 +228,7 @@ class RunTimeCheck:
                 feats.normal_cam,
                 feats.long_axis_cam,
                 feats.short_axis_cam,
-                paper_x_axis(feats),
+                quarter_turned_x_axis(feats) if quarter_turn else paper_x_axis(feats),
                 pattern,
                 obs.intrinsics,
                 list(self.bin_ids) + list(obstacles),

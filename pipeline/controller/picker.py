@@ -16,7 +16,10 @@ objects and gives back plans and joint commands. It never sees the simulated wor
 3. the first ``evaluate.max_candidates_checked`` grasps in rank order, each with its patterns
    in order of preference (the planner's; with ``evaluate.single_cup_fallback`` a B is
    followed by L, then R, right after it or, with ``evaluate.single_cup_fallback_order:
-   last``, after every grasp's own pattern; a single suction point is served by
+   last``, after every grasp's own pattern; with ``evaluate.two_cups_first``, an L or R (of the
+   second tier, or any) is tried with both cups first, then with its own cup; with
+   ``evaluate.b_quarter_turn``, every B is followed by B with the hand turned by 90°, its cups
+   along the other axis of the surface; a single suction point is served by
    ``evaluate.dexnet_pattern``'s cup, then the other): skipped when it repeats a failed plan
    (the retry memory); with ``evaluate.check_reachability`` (default) executed only when the
    descriptor finds a surface at it and the run-time check passes. The first that does is the
@@ -47,6 +50,8 @@ from pipeline.controller.planning import Grasp, checked_grasps
 from pipeline.controller.retry import RetryMemory
 
 FALLBACK_ORDERS = ("at_once", "last")  # evaluate.single_cup_fallback_order
+TWO_CUPS_FIRST = ("none", "second_tier", "all")  # evaluate.two_cups_first
+QUARTER_B = "B90"  # in the selection's order: B, the hand turned by 90° (evaluate.b_quarter_turn)
 
 
 @dataclass
@@ -109,6 +114,11 @@ class RobotController:
             raise ValueError(
                 f"evaluate.single_cup_fallback_order is {order!r}: choose from {FALLBACK_ORDERS}"
             )
+        upgrade = str(cfg.evaluate.two_cups_first)
+        if upgrade not in TWO_CUPS_FIRST:
+            raise ValueError(
+                f"evaluate.two_cups_first is {upgrade!r}: choose from {TWO_CUPS_FIRST}"
+            )
         self.checker = RunTimeCheck(cfg, collision_model)
         self.robot = self.checker.robot
         self.kin = Kinematics(cfg, self.robot)
@@ -135,9 +145,19 @@ class RobotController:
     def patterns(self, grasp: Grasp) -> list[str]:
         """The patterns a grasp may be executed with, in order of preference (module
         docstring, step 3)."""
+        out = self._patterns(grasp)
+        if bool(self.cfg.evaluate.b_quarter_turn):
+            out = [q for p in out for q in ((p, QUARTER_B) if p == "B" else (p,))]
+        return out
+
+    def _patterns(self, grasp: Grasp) -> list[str]:
+        """:meth:`patterns` without B's quarter turn."""
         if grasp.pattern is not None:
             if grasp.pattern == "B" and bool(self.cfg.evaluate.single_cup_fallback):
                 return ["B", "L", "R"]
+            upgrade = str(self.cfg.evaluate.two_cups_first)
+            if upgrade == "all" or (upgrade == "second_tier" and grasp.second_tier):
+                return ["B", grasp.pattern]  # both cups first where they fit
             return [grasp.pattern]
         preferred = str(self.cfg.evaluate.dexnet_pattern)
         if preferred == "B":
@@ -270,8 +290,12 @@ class RobotController:
             self.checker.update(obs)
         points: dict[int, np.ndarray | None] = {}  # per grasp, its point in the world, once
         surfaces: dict[int, tuple] = {}  # per grasp, found once when first needed: (feats, sites)
-        for i, pattern in self.order(grasps[:limit]):
+        for i, entry in self.order(grasps[:limit]):
             grasp = grasps[i]
+            quarter = entry == QUARTER_B  # B with the hand turned by 90°: only a check can turn it
+            pattern = "B" if quarter else entry
+            if quarter and not gate:
+                continue
             if i not in points:
                 points[i] = self.point_world(obs, grasp)
             point = points[i]
@@ -298,6 +322,7 @@ class RobotController:
                 pattern,
                 (grasp.u, grasp.v),
                 hand_fit=bool(ev.check_hand_fit) and grasp.pattern is not None,
+                quarter_turn=quarter,
             )
             if check is not None:
                 out.plan = Plan(grasp, pattern, obs, point, check.x_world, check.path, sites, fixed)
@@ -315,7 +340,7 @@ class RobotController:
             return pairs
         own, fallback = [], []
         for i, p in pairs:
-            (own if grasps[i].pattern in (p, None) else fallback).append((i, p))
+            (fallback if grasps[i].pattern == "B" and p in ("L", "R") else own).append((i, p))
         return own + fallback
 
     # ------------------------------------------------------------------ execution

@@ -148,6 +148,10 @@ def object_heap_scene(
     renderer = str(cfg.camera.renderer)
     check_renderer(renderer)
     cell = build_cell(client, cfg.bin, cfg.physics)
+    # the object heaps' own solver iterations (conf/objects/: few small contacts settle at fewer)
+    p.setPhysicsEngineParameter(
+        numSolverIterations=int(cfg.objects.solver_iterations), physicsClientId=client
+    )
     heap = drop_object_heap(client, rng, cfg.objects, cfg.bin, cfg.physics)
     intr = Intrinsics.from_config(cfg.camera)
     T_world_cam = camera_pose_above_bin(cfg.camera.height_above_bin_floor)

@@ -406,7 +406,7 @@ def render_evaluate(
         f"Pick-and-place trials in pybullet (evaluation artifact `{info.version}`, "
         f"{split} split): {ev.get('num_trials')} trials of {ev.get('boxes_per_trial')} boxes "
         "per planner, the same heaps (same seeds) for every planner, boxes of `eval_boxes` "
-        "(the three training sizes and four unseen ones). " + _split_note(split) + " Success "
+        "(the paper's three sizes and four others). " + _split_note(split) + " Success "
         "rate = successful grasps / attempts (the paper's figure); boxes picked = boxes taken "
         "out of the bins / boxes dropped in (what the success rate leaves out: boxes the robot "
         "found no grasp for); both with their Wilson 95 % score interval in brackets. PPH = "

@@ -136,9 +136,9 @@ def render_unseen(info: UnseenInfo, tables: dict[str, Table]) -> list[str]:
     )
     out += [
         f"Unseen-size artifact `{info.version}` (`python -m pipeline.stages.unseen`): the trained "
-        "network and the Dex-Net-style planners, all trained on the three training sizes, on a "
-        f"test split of heaps of other boxes ({sizes}), beside the same tables on the training "
-        "sizes' test split (*seen*, from the train and baseline artifacts). Definitions as in "
+        "network and the Dex-Net-style planners on a test split of heaps of boxes outside their "
+        f"training distribution ({sizes}), beside the same tables on the paper's sizes' "
+        "test split (*seen*, from the train and baseline artifacts). Definitions as in "
         "Tables 1 and 2 above; the network plans at its calibrated th.",
         "",
         tables["unseen_table1"].markdown(),

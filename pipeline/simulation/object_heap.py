@@ -5,7 +5,9 @@ random convex objects of ``pipeline.simulation.objects`` (cylinders, prisms, con
 the same bin, dropped, settled and cleaned up exactly as ``pipeline.simulation.heap`` does it for
 boxes: the same cell (``pipeline.cell.bin.build_cell``), drop height, drop cadence, margin
 from the walls, rest criterion (``heap.settle``, watching the corners of each object's bounding
-box in its own frame) and removal of objects that came to rest outside the bin.
+box in its own frame) and removal of objects that came to rest outside the bin. The one
+difference is the caller's: ``pipeline.dexnet.ood`` settles them at ``objects.solver_iterations``
+(docs/simulation.md, "Solver iterations").
 
 World frame: z up, origin at the centre of the bin floor's top surface; metres, seconds
 (``pipeline.simulation.heap``).

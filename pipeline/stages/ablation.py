@@ -3,9 +3,9 @@
     python -m pipeline.stages.ablation [experiment=default] [ablation.planners=[oracle,dcnn]]
 
 Each variant of ``ablation.variants`` (``conf/stage/ablation.yaml``) is one run of the evaluation
-stage with the variant's overrides, for each planner of ``ablation.planners`` (or only
-those ``ablation.variant_planners`` names for it, where its overrides cannot change the others'
-trials) and
+stage with the variant's overrides, for each planner that ``ablation.variant_planners`` names for
+it (those of ``ablation.planners`` where it names none; rows grouped by planner in the
+evaluation's order of planners), with
 ``ablation.trials`` trials, on the ``dev`` heaps (the ablation is development; the report's
 Table 3 is measured on ``test``, which nothing is chosen on; the heaps depend only on ``seed``,
 the split and the trial index). Every run is an evaluation artifact of its own (reused when its
@@ -47,15 +47,20 @@ ROW_KEYS = (*RATE_KEYS, "path_deviation_mm_median", "path_deviation_mm_max", "no
 def run_variants(cfg: DictConfig, base: list[str]) -> list[dict]:
     """One evaluation per (planner, variant) and its Table 3 row, in config order."""
     from pipeline.artifacts.pointers import keep_latest
-    from pipeline.stages.evaluate import evaluate
+    from pipeline.stages.evaluate import PLANNERS, evaluate
 
     ab = cfg.ablation
+
+    def planners_of(variant) -> list[str]:
+        return [str(p) for p in ab.variant_planners.get(variant.name, ab.planners)]
+
+    used = {p for v in ab.variants for p in planners_of(v)}
     rows = []
     with keep_latest([data_root(cfg) / "evaluate"]):
-        for planner in ab.planners:
+        for planner in [p for p in PLANNERS if p in used]:
             for v in ab.variants:
-                if planner not in ab.variant_planners.get(v.name, [planner]):
-                    continue  # the variant does not change this planner's trials
+                if planner not in planners_of(v):
+                    continue
                 overrides = [str(o) for o in v.overrides]
                 extra = [
                     f"planner={planner}",

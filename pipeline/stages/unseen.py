@@ -8,7 +8,7 @@ With the command's own overrides:
 
 * it reads the trained network (``unseen.train_version``) and the baseline artifact that
   compared it (``unseen.baseline_version``; both ``latest`` by default, as ``make reproduce``
-  leaves them): the network and the Dex-Net-style GQ-CNNs, trained on the three training sizes
+  leaves them): the network and the Dex-Net-style GQ-CNNs, trained on the training heaps' boxes
   (the in-domain one) or on other objects;
 * it runs (or reuses) ``generate boxes=<unseen.boxes>`` with a test split only
 (``unseen.test_scenes`` heaps; no
@@ -28,7 +28,7 @@ every
   Table 3's rows (success and boxes picked with their Wilson intervals, trial ends, failure
   reasons) and how often each pattern dropped a box, by box mass.
 
-The seen-size figures (the same tables on the training sizes' test split) are read from the
+The seen-size figures (the same tables on the paper's sizes' test split) are read from the
 train and baseline manifests, so the report shows both side by side.
 
 Artifact (``data/unseen/<version>/``)::
