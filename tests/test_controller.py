@@ -21,6 +21,7 @@ from pipeline.controller.heap_model import (
     agreeing_neighbours,
     build_heightmap,
     fill_unknown,
+    plane_surface,
 )
 from pipeline.controller.observation import Observation
 from pipeline.controller.planning import Grasp, PlannerError, checked_grasps, load_plugin
@@ -142,6 +143,40 @@ def test_the_grasped_surface_is_left_out():
     assert half[rows[2], cols[2]] == pytest.approx(0.052, abs=1e-4)  # x = +0.05: kept
     assert half[rows[3], cols[3]] == 0.0  # x = −0.05: left out
     assert model.heights_without(None) is m.heights
+
+
+def test_the_rest_of_the_grasped_face_joins_its_region_through_its_plane():
+    """``plane_surface``: the medium box's top (z = 0.052, 0.625 m below the home camera, so
+    0.573 m from it along the camera's axis, normal (0, 0, -1) in the camera frame) with half
+    of it as the region. With a 5 mm tolerance the other half joins (its points lie on the
+    plane), a patch raised by 3 mm (a sensor's noise) joins too, and the cube's top 48 mm higher
+    and the floor 52 mm lower do not, nor a patch of the face raised by 8 mm (a real obstacle's
+    height above it). With a 2 mm tolerance the 3 mm patch stays out too. The model without
+    that surface drops the cells of the region's other half, which the region alone keeps."""
+    obs = observe(
+        [((0.0, 0.0, 0.026), (0.145, 0.092, 0.052)), ((0.12, 0.09, 0.05), (0.06, 0.06, 0.10))]
+    )
+    depth = obs.depth_m.copy()
+    top = np.abs(depth - 0.573) < 1e-4
+    cols = np.arange(416)[None, :]
+    raised_3mm = top & (np.arange(416)[:, None] < 195) & (cols > 240) & (cols < 250)
+    raised_8mm = top & (np.arange(416)[:, None] > 220) & (cols > 240) & (cols < 250)
+    depth[raised_3mm] -= 0.003
+    depth[raised_8mm] -= 0.008
+    obs = dataclasses.replace(obs, depth_m=depth)
+    region = top & (cols < 207)
+    centre, normal = np.array([0.0, 0.0, 0.573]), np.array([0.0, 0.0, -1.0])
+    surface = plane_surface(obs, region, centre, normal, 0.005)
+    assert surface[top & ~raised_8mm].all()  # the whole face, the 3 mm patch included
+    assert not surface[raised_8mm].any()
+    assert not surface[~top].any()  # neither the cube, nor the floor, nor the face's sides
+    tight = plane_surface(obs, region, centre, normal, 0.002)
+    assert (tight == (top & ~raised_3mm & ~raised_8mm)).all()
+    model = HeapModel(BIN, HEAP)
+    m = model.update(obs)
+    rows, cols_ = m.cell_of(np.array([[0.05, 0.0]]))
+    assert model.heights_without(region)[rows[0], cols_[0]] == pytest.approx(0.052, abs=1e-4)
+    assert model.heights_without(surface)[rows[0], cols_[0]] == 0.0
 
 
 def test_collider_by_hand():

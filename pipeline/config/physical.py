@@ -337,3 +337,4 @@ class HeapModelSchema:
         MISSING  # neighbours within this depth agree (0: no flying-pixel step)
     )
     flying_min_neighbours: int = MISSING  # a pixel needs this many agreeing neighbours of its 8
+    surface_tolerance_m: float = MISSING  # the grasped face: points this near its plane (0: off)

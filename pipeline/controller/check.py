@@ -30,7 +30,13 @@ import numpy as np
 import pybullet as p
 
 from pipeline.cell.bin import build_cell
-from pipeline.controller.heap_model import HeapCollider, HeapModel, HeapModelConfig, LinkSurface
+from pipeline.controller.heap_model import (
+    HeapCollider,
+    HeapModel,
+    HeapModelConfig,
+    LinkSurface,
+    plane_surface,
+)
 from pipeline.controller.observation import Observation
 from pipeline.grasping.hand import cup_fits
 from pipeline.labelling.grasp_check import GraspCheck, check_grasp
@@ -81,9 +87,12 @@ class CollisionModel(Protocol):
     def update(self, obs: Observation) -> None:
         """A new home image (the start of a plan)."""
 
-    def excluding(self, obs: Observation, uv: tuple[float, float], region: np.ndarray | None):
+    def excluding(
+        self, obs: Observation, uv: tuple[float, float], region: np.ndarray | None, plane=None
+    ):
         """A context manager giving (obstacle body ids, body ids to ignore) for a grasp at
-        pixel ``uv`` of ``obs`` on the surface ``region`` ((H, W) bool or None)."""
+        pixel ``uv`` of ``obs`` on the surface ``region`` ((H, W) bool or None) whose plane is
+        ``plane`` ((centre, normal), home camera frame, or None)."""
 
     def clear(self) -> None:
         """Remove every body the model added."""
@@ -102,8 +111,11 @@ class ObservedHeap:
         self.model.update(obs)
 
     @contextlib.contextmanager
-    def excluding(self, obs: Observation, uv, region):
+    def excluding(self, obs: Observation, uv, region, plane=None):
         m = self.model.map
+        tol = self.model.cfg.surface_tolerance_m
+        if tol > 0 and plane is not None and region is not None:
+            region = plane_surface(obs, region, plane[0], plane[1], tol)
         self.robot.heap = HeapCollider(
             self.model.heights_without(region), m.origin, m.cell_m, self.margin
         )
@@ -124,6 +136,7 @@ def heap_model_config(cfg) -> HeapModelConfig:
         bin_tolerance_m=float(h.bin_tolerance_m),
         flying_tolerance_m=float(h.flying_tolerance_m),
         flying_min_neighbours=int(h.flying_min_neighbours),
+        surface_tolerance_m=float(h.surface_tolerance_m),
     )
 
 
@@ -218,7 +231,8 @@ class RunTimeCheck:
         cfg = self.cfg
         if hand_fit and not pattern_fits(feats, pattern, cfg.hand, quarter_turn):
             return None, "hand_fit"
-        with self.heap.excluding(obs, uv, feats.region) as (obstacles, ignore):
+        plane = (feats.center_cam, feats.normal_cam)
+        with self.heap.excluding(obs, uv, feats.region, plane) as (obstacles, ignore):
             check = check_grasp(
                 self.robot,
                 cfg,

@@ -36,7 +36,11 @@ heights under it is not sampled at all.
 the cells holding pixels of the surface the descriptor finds at it (its region) take the height
 of their other points only (0 when they have none) while that candidate is checked
 (:meth:`HeapModel.heights_without`). What the descriptor finds is what the servo will track; no
-instance mask is used.
+instance mask is used. On a noisy sensor's depth the region can stop short of the face, and the
+face's other pixels, raised by the noise, stood as columns under the cups (1 cm above the face at
+the grasp pose, with a 5 mm margin): with ``surface_tolerance_m`` > 0 the surface left out is the
+region and every pixel connected to it through points within that distance of its plane
+(:func:`plane_surface`).
 
 Frames: world (z up, origin at the centre of the bin floor's top surface); grid rows along +y,
 columns along +x, cell (0, 0) at the bin's (−x, −y) corner. Metres.
@@ -48,6 +52,7 @@ import functools
 import math
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 import pybullet as p
 
@@ -62,6 +67,7 @@ class HeapModelConfig:
     bin_tolerance_m: float  # points this near the bin's floor or inner walls are the bin
     flying_tolerance_m: float  # step 0: neighbours within this depth agree (0: step off)
     flying_min_neighbours: int  # step 0: a pixel needs this many agreeing neighbours of 8
+    surface_tolerance_m: float = 0.0  # the grasped surface's plane: points this near it (0: off)
 
 
 @dataclass
@@ -201,6 +207,31 @@ def fill_unknown(heights: np.ndarray, known: np.ndarray) -> np.ndarray:
         h = np.where(new, best, h)
         known = known | new
     return h
+
+
+def plane_surface(
+    obs: Observation,
+    region: np.ndarray,
+    centre_cam: np.ndarray,
+    normal_cam: np.ndarray,
+    tolerance_m: float,
+) -> np.ndarray:
+    """(H, W) bool: ``region`` and every pixel connected to it (8-neighbours) through pixels
+    whose point lies within ``tolerance_m`` of the surface's plane (through ``centre_cam``,
+    normal ``normal_cam``; home camera frame, metres): the rest of the grasped face where the
+    descriptor's region, grown on a noisy sensor's depth, stopped short of it."""
+    depth = np.asarray(obs.depth_m, np.float64)
+    h, w = depth.shape
+    valid = np.isfinite(depth) & (depth > 0)
+    ax, ay = _ray_factors(obs.intrinsics, h, w)
+    n = np.asarray(normal_cam, np.float64)
+    n = n / np.linalg.norm(n)
+    z = np.where(valid, depth, 0.0)
+    dist = (ax * z * n[0] + ay * z * n[1] + z * n[2]) - float(n @ np.asarray(centre_cam))
+    near = valid & (np.abs(dist) <= tolerance_m) | region
+    count, labels = cv2.connectedComponents(near.astype(np.uint8), connectivity=8)
+    touched = np.unique(labels[region & near])
+    return np.isin(labels, touched[touched > 0])
 
 
 class HeapModel:

@@ -42,7 +42,7 @@ class TruthHeap:
             self.mirror[body] = collision_box(self.client, info["size"], T)
 
     @contextlib.contextmanager
-    def excluding(self, obs: Observation, uv, region):
+    def excluding(self, obs: Observation, uv, region, plane=None):
         ids = self.cell.last_frame.body_ids
         r, c = int(round(uv[1])), int(round(uv[0]))
         target = int(ids[r, c]) if 0 <= r < ids.shape[0] and 0 <= c < ids.shape[1] else -1
