@@ -140,20 +140,19 @@ def heap_model_config(cfg) -> HeapModelConfig:
     )
 
 
+def hand_x_axis(feats, quarter_turn: bool) -> np.ndarray:
+    """The surface axis whose warped view is nearer the image X (larger |cos|), or with
+    ``quarter_turn`` the other one, signed towards +X of its warped view (camera frame)."""
+    axes = [(feats.long_axis_cam, feats.warped_long), (feats.short_axis_cam, feats.warped_short)]
+    nearer = int(np.argmax([abs(w[0]) for _, w in axes]))
+    axis, warped = axes[1 - nearer if quarter_turn else nearer]
+    return np.asarray(axis if warped[0] >= 0 else -axis, np.float64)
+
+
 def paper_x_axis(feats) -> np.ndarray:
     """The hand's X by the paper's rule (camera frame): the surface axis whose warped view is
     nearer the image X, signed towards +X."""
-    axes = [(feats.long_axis_cam, feats.warped_long), (feats.short_axis_cam, feats.warped_short)]
-    axis, warped = axes[int(np.argmax([abs(w[0]) for _, w in axes]))]  # larger |cos|: nearer X
-    return np.asarray(axis if warped[0] >= 0 else -axis, np.float64)
-
-
-def quarter_turned_x_axis(feats) -> np.ndarray:
-    """The hand's X turned by a quarter from the paper's rule (camera frame): the other surface
-    axis of :func:`paper_x_axis`, signed towards +X of its warped view."""
-    axes = [(feats.long_axis_cam, feats.warped_long), (feats.short_axis_cam, feats.warped_short)]
-    axis, warped = axes[1 - int(np.argmax([abs(w[0]) for _, w in axes]))]
-    return np.asarray(axis if warped[0] >= 0 else -axis, np.float64)
+    return hand_x_axis(feats, quarter_turn=False)
 
 
 def pattern_fits(feats, pattern: str, hand_cfg, quarter_turn: bool = False) -> bool:
@@ -165,7 +164,7 @@ def pattern_fits(feats, pattern: str, hand_cfg, quarter_turn: bool = False) -> b
     the one active cup on the centre for L and R. Turning the hand by 90°
     (``hand.rotations_deg``) leaves a single cup's fit unchanged, and B takes only 0 and 180°,
     so the paper's axis decides; with ``quarter_turn`` the hand's X is the other axis
-    (:func:`quarter_turned_x_axis`), and B's cups lie along the paper's X."""
+    (:func:`hand_x_axis`), and B's cups lie along the paper's X."""
     x_is_long = (abs(feats.warped_long[0]) >= abs(feats.warped_short[0])) != quarter_turn
     half_x, half_y = (
         (feats.long_length / 2, feats.short_length / 2)
@@ -226,7 +225,7 @@ class RunTimeCheck:
         ``feats`` at pixel ``uv`` of the home observation ``obs``: "hand_fit" with
         ``hand_fit`` when the cups do not fit, else the failed check of ``check_grasp``. With
         ``quarter_turn`` the hand's X is turned by 90° from the paper's rule
-        (:func:`quarter_turned_x_axis`); the passing check's ``x_world`` carries it to the
+        (:func:`hand_x_axis`); the passing check's ``x_world`` carries it to the
         servo."""
         cfg = self.cfg
         if hand_fit and not pattern_fits(feats, pattern, cfg.hand, quarter_turn):
@@ -242,7 +241,7 @@ class RunTimeCheck:
                 feats.normal_cam,
                 feats.long_axis_cam,
                 feats.short_axis_cam,
-                quarter_turned_x_axis(feats) if quarter_turn else paper_x_axis(feats),
+                hand_x_axis(feats, quarter_turn),
                 pattern,
                 obs.intrinsics,
                 list(self.bin_ids) + list(obstacles),

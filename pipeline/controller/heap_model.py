@@ -146,15 +146,21 @@ def _ray_factors(intr, h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
     return ax[None, :], ay[:, None]
 
 
-def world_points(obs: Observation) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
-    """((x, y, z), valid): the world coordinates (H, W) each of every pixel's point, and the
-    (H, W) bool of pixels with depth (the others are at the camera's centre)."""
+def camera_points(obs: Observation) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
+    """((x, y, z), valid): the camera-frame coordinates (H, W) each of every pixel's point,
+    metres, and the (H, W) bool of pixels with depth (the others are at the camera's centre)."""
     depth = np.asarray(obs.depth_m, np.float64)
     h, w = depth.shape
     valid = np.isfinite(depth) & (depth > 0)
     ax, ay = _ray_factors(obs.intrinsics, h, w)
     z = np.where(valid, depth, 0.0)
-    x, y = ax * z, ay * z  # camera frame
+    return (ax * z, ay * z, z), valid
+
+
+def world_points(obs: Observation) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
+    """((x, y, z), valid): the world coordinates (H, W) each of every pixel's point, and the
+    (H, W) bool of pixels with depth (the others are at the camera's centre)."""
+    (x, y, z), valid = camera_points(obs)
     R, t = obs.T_world_cam[:3, :3], obs.T_world_cam[:3, 3]
     world = tuple(x * R[i, 0] + y * R[i, 1] + z * R[i, 2] + t[i] for i in range(3))
     return world, valid
@@ -220,17 +226,13 @@ def plane_surface(
     whose point lies within ``tolerance_m`` of the surface's plane (through ``centre_cam``,
     normal ``normal_cam``; home camera frame, metres): the rest of the grasped face where the
     descriptor's region, grown on a noisy sensor's depth, stopped short of it."""
-    depth = np.asarray(obs.depth_m, np.float64)
-    h, w = depth.shape
-    valid = np.isfinite(depth) & (depth > 0)
-    ax, ay = _ray_factors(obs.intrinsics, h, w)
+    (x, y, z), valid = camera_points(obs)
     n = np.asarray(normal_cam, np.float64)
     n = n / np.linalg.norm(n)
-    z = np.where(valid, depth, 0.0)
-    dist = (ax * z * n[0] + ay * z * n[1] + z * n[2]) - float(n @ np.asarray(centre_cam))
-    near = valid & (np.abs(dist) <= tolerance_m) | region
-    count, labels = cv2.connectedComponents(near.astype(np.uint8), connectivity=8)
-    touched = np.unique(labels[region & near])
+    dist = x * n[0] + y * n[1] + z * n[2] - float(n @ np.asarray(centre_cam))
+    near = (valid & (np.abs(dist) <= tolerance_m)) | region
+    _, labels = cv2.connectedComponents(near.astype(np.uint8), connectivity=8)
+    touched = np.unique(labels[region])
     return np.isin(labels, touched[touched > 0])
 
 
